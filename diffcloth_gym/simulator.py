@@ -1,0 +1,195 @@
+"""Python face of the Rust simulator: config loading and array conversion, nothing else."""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from diffcloth_gym import _core
+from diffcloth_gym.errors import ConfigError, InputError
+
+#: Folder of the scene configs shipped with the project.
+CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
+
+
+def load_config(config: str | Path | Mapping[str, Any]) -> tuple[dict, Path]:
+    """Returns ``(config dict, base folder for relative paths)``.
+
+    ``config`` is a scene name in ``configs/`` (``"wind"``), a path to a TOML file, or a dict
+    with the same structure as the TOML files.
+    """
+    if isinstance(config, Mapping):
+        return dict(config), Path.cwd()
+    path = Path(config)
+    if not path.suffix and not path.exists():
+        path = CONFIG_DIR / f"{config}.toml"
+    if not path.is_file():
+        known = sorted(p.stem for p in CONFIG_DIR.glob("*.toml"))
+        raise ConfigError(f"no scene config {str(config)!r} (not a file; shipped scenes: {known})")
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f), path.resolve().parent
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{path}: {e}") from None
+
+
+def _nodes(name: str, value: Any, rows: int | None = None) -> np.ndarray:
+    """Converts array-likes to a contiguous (n, 3) float64 array, naming ``name`` in errors."""
+    try:
+        a = np.ascontiguousarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"{name} must be an (n, 3) array of numbers: {e}") from None
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise InputError(f"{name} must have shape (n, 3), got {a.shape}")
+    if rows is not None and a.shape[0] != rows:
+        raise InputError(f"{name} must have {rows} rows, got {a.shape[0]}")
+    return a
+
+
+class Simulator:
+    """A cloth scene simulated forward in time (projective dynamics, implicit Euler).
+
+    Build one with :meth:`from_config`. Arrays are numpy float64, one row per node (x, y, z).
+    Long calls run in Rust with the GIL released. Bad input raises a ``ValueError``
+    subclass (see :mod:`diffcloth_gym.errors`) and leaves the simulator usable.
+    """
+
+    def __init__(self, core: _core.Simulator, config: dict):
+        self._core = core
+        #: The scene config this simulator was built from (a dict).
+        self.config = config
+
+    @classmethod
+    def from_config(cls, config: str | Path | Mapping[str, Any]) -> "Simulator":
+        """Builds a simulator from a scene name in ``configs/``, a TOML path, or a dict."""
+        cfg, base = load_config(config)
+        try:
+            text = json.dumps(cfg)
+        except (TypeError, ValueError) as e:
+            raise ConfigError(f"config is not serializable: {e}") from None
+        return cls(_core.Simulator.from_json(text, str(base)), cfg)
+
+    # -- state ---------------------------------------------------------------------------
+    def reset(self, x: Any = None, v: Any = None) -> None:
+        """Sets positions ``x`` (default: rest shape) and velocities ``v`` (default: zero),
+        time to 0 and attachment targets to the attached nodes' positions."""
+        n = self.num_nodes
+        self._core.reset(None if x is None else _nodes("x", x, n), None if v is None else _nodes("v", v, n))
+
+    def step(self, attachment_targets: Any = None, external_forces: Any = None, steps: int = 1) -> dict:
+        """Advances ``steps`` implicit-Euler steps (default 1).
+
+        ``attachment_targets``: (k, 3) targets of the k attached nodes (the end effectors);
+        ``None`` keeps the previous targets. ``external_forces``: (n, 3) forces in N per node
+        (needs the ``external_forces`` effect). Returns the last step's solver stats
+        ``{"iterations", "residual", "converged"}``.
+        """
+        if not isinstance(steps, int) or steps < 1:
+            raise InputError(f"steps must be a positive integer, got {steps!r}")
+        k = len(self.attachment_nodes)
+        targets = None if attachment_targets is None else _nodes("attachment_targets", attachment_targets, k)
+        forces = None if external_forces is None else _nodes("external_forces", external_forces, self.num_nodes)
+        return self._core.step(targets, forces, steps)
+
+    @property
+    def positions(self) -> np.ndarray:
+        """Node positions, (n, 3) float64 (a copy)."""
+        return self._core.positions
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """Node velocities, (n, 3) float64 (a copy)."""
+        return self._core.velocities
+
+    @property
+    def rest_positions(self) -> np.ndarray:
+        """Rest shape (after the config's placement), (n, 3)."""
+        return self._core.rest_positions
+
+    @property
+    def triangles(self) -> np.ndarray:
+        """Triangle node indices, (t, 3) int64."""
+        return self._core.triangles
+
+    @property
+    def masses(self) -> np.ndarray:
+        """Lumped node masses in kg, (n,)."""
+        return np.asarray(self._core.masses)
+
+    @property
+    def num_nodes(self) -> int:
+        return self._core.num_nodes
+
+    @property
+    def time(self) -> float:
+        """Simulated time since reset in seconds."""
+        return self._core.time
+
+    @property
+    def attachment_nodes(self) -> list[int]:
+        """Indices of the attached nodes, in the order of ``attachment_targets``."""
+        return self._core.attachment_nodes
+
+    @property
+    def attachment_targets(self) -> np.ndarray:
+        """Current attachment targets, (k, 3)."""
+        return self._core.attachment_targets
+
+    @property
+    def handles(self) -> list[int]:
+        """Suggested end-effector nodes of a garment mesh (empty for grids and OBJ meshes)."""
+        return self._core.handles
+
+    @property
+    def effects(self) -> list[str]:
+        """The effects this scene simulates."""
+        return self._core.effects
+
+    # -- parameters ----------------------------------------------------------------------
+    def params(self) -> dict:
+        """Physical parameters: h, density, k_stretch, k_bend, k_attach, gravity, wind_*."""
+        return self._core.params()
+
+    def set_params(self, **params: Any) -> None:
+        """Changes physical parameters by name; refactors the system matrix only when h,
+        density or a stiffness changes. Unknown names or invalid values raise
+        :class:`~diffcloth_gym.errors.ParameterError` and change nothing."""
+        self._core.set_params(**params)
+
+    def solver(self) -> dict:
+        """Accuracy knobs: max_iterations, tolerance, acceleration, history, parallel."""
+        return self._core.solver()
+
+    def set_solver(self, **settings: Any) -> None:
+        """Changes solver settings by name (see :meth:`solver`)."""
+        self._core.set_solver(**settings)
+
+    # -- diagnostics ---------------------------------------------------------------------
+    def profile(self) -> dict:
+        """Wall time per stage in seconds (``local_s``, ``global_s``, ``other_s``,
+        ``refactor_s``, ``total_s``) and counters (``steps``, ``iterations``, ...) since the
+        last :meth:`reset_profile`."""
+        return self._core.profile()
+
+    def reset_profile(self) -> None:
+        self._core.reset_profile()
+
+    def last_step(self) -> dict:
+        """Solver stats of the last step."""
+        return self._core.last_step()
+
+    def mechanical_energy(self) -> float:
+        """Kinetic + gravitational + elastic energy of the current state (J)."""
+        return self._core.mechanical_energy()
+
+    def principal_stretches(self) -> np.ndarray:
+        """Principal stretches (s1 >= s2) of each triangle, (t, 2)."""
+        return self._core.principal_stretches()
+
+    def write_obj(self, path: str | Path) -> None:
+        """Writes the current state as a Wavefront OBJ file."""
+        self._core.write_obj(str(path))

@@ -1,0 +1,316 @@
+//! Thin Python binding (`diffcloth_gym._core`): converts arrays, maps errors to the exception
+//! tree in `diffcloth_gym.errors`, releases the GIL for long calls. No physics here.
+
+use diffcloth::{Error, Params, SceneConfig, Simulator, SolverSettings, StepInput, StepStats, Vec3};
+use numpy::{PyArray2, PyReadonlyArray2, ToPyArray};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::Path;
+
+/// Raises the `diffcloth_gym.errors` class that matches the core error.
+fn to_py_err(py: Python<'_>, err: Error) -> PyErr {
+    let class = match &err {
+        Error::Config(_) | Error::Io { .. } => "ConfigError",
+        Error::Mesh(_) => "MeshError",
+        Error::Input(_) => "InputError",
+        Error::Param(_) => "ParameterError",
+        Error::Solver(_) => "SolverError",
+        Error::Diverged(_) => "DivergedError",
+        _ => "DiffClothError",
+    };
+    raise(py, class, err.to_string())
+}
+
+fn raise(py: Python<'_>, class: &str, message: String) -> PyErr {
+    match py.import("diffcloth_gym.errors").and_then(|m| m.getattr(class)) {
+        Ok(ty) => PyErr::from_type(ty.cast_into().expect("errors are exception classes"), message),
+        Err(_) => PyValueError::new_err(message),
+    }
+}
+
+/// Runs core code without the GIL; a panic (a bug, never bad input) becomes `InternalError`
+/// instead of tearing down the interpreter.
+fn guarded<T: Send>(py: Python<'_>, f: impl FnOnce() -> diffcloth::Result<T> + Send) -> PyResult<T> {
+    match py.detach(|| catch_unwind(AssertUnwindSafe(f))) {
+        Ok(Ok(v)) => Ok(v),
+        Ok(Err(e)) => Err(to_py_err(py, e)),
+        Err(panic) => {
+            let msg = panic
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "unknown panic".into());
+            Err(raise(py, "InternalError", format!("internal error in the simulator (please report): {msg}")))
+        }
+    }
+}
+
+/// Copies an (n, 3) float64 array into nodes, naming the argument in errors.
+fn read_nodes(py: Python<'_>, name: &str, a: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<Vec3>> {
+    let shape = a.as_array().shape().to_vec();
+    if shape.len() != 2 || shape[1] != 3 {
+        return Err(raise(py, "InputError", format!("{name} must have shape (n, 3), got {shape:?}")));
+    }
+    let view = a.as_array();
+    Ok(view.outer_iter().map(|r| Vec3::new(r[0], r[1], r[2])).collect())
+}
+
+fn nodes_to_py<'py>(py: Python<'py>, nodes: &[Vec3]) -> Bound<'py, PyArray2<f64>> {
+    let flat: Vec<f64> = nodes.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+    numpy::ndarray::Array2::from_shape_vec((nodes.len(), 3), flat).expect("n x 3").to_pyarray(py)
+}
+
+fn stats_dict<'py>(py: Python<'py>, s: StepStats) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("iterations", s.iterations)?;
+    d.set_item("residual", s.residual)?;
+    d.set_item("converged", s.converged)?;
+    Ok(d)
+}
+
+#[pyclass(name = "Simulator", module = "diffcloth_gym._core")]
+struct PySimulator {
+    inner: Simulator,
+}
+
+#[pymethods]
+impl PySimulator {
+    /// Builds a simulator from a scene config in JSON; relative paths resolve against base_dir.
+    #[staticmethod]
+    fn from_json(py: Python<'_>, config_json: &str, base_dir: &str) -> PyResult<Self> {
+        let inner = guarded(py, || {
+            diffcloth::init_linear_algebra();
+            Simulator::new(&SceneConfig::from_json_str(config_json, Path::new(base_dir))?)
+        })?;
+        Ok(Self { inner })
+    }
+
+    #[pyo3(signature = (x=None, v=None))]
+    fn reset(&mut self, py: Python<'_>, x: Option<PyReadonlyArray2<'_, f64>>, v: Option<PyReadonlyArray2<'_, f64>>) -> PyResult<()> {
+        let x = x.map(|a| read_nodes(py, "x", &a)).transpose()?;
+        let v = v.map(|a| read_nodes(py, "v", &a)).transpose()?;
+        let sim = &mut self.inner;
+        guarded(py, || sim.reset(x.as_deref(), v.as_deref()))
+    }
+
+    /// Advances `steps` steps with the same inputs; returns the last step's stats.
+    #[pyo3(signature = (attachment_targets=None, external_forces=None, steps=1))]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        attachment_targets: Option<PyReadonlyArray2<'_, f64>>,
+        external_forces: Option<PyReadonlyArray2<'_, f64>>,
+        steps: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let targets = attachment_targets.map(|a| read_nodes(py, "attachment_targets", &a)).transpose()?;
+        let forces = external_forces.map(|a| read_nodes(py, "external_forces", &a)).transpose()?;
+        let sim = &mut self.inner;
+        let stats = guarded(py, || {
+            let mut last = StepStats::default();
+            for _ in 0..steps {
+                last = sim.step(StepInput { attachment_targets: targets.as_deref(), external_forces: forces.as_deref() })?;
+            }
+            Ok(last)
+        })?;
+        stats_dict(py, stats)
+    }
+
+    #[getter]
+    fn positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        nodes_to_py(py, self.inner.positions())
+    }
+    #[getter]
+    fn velocities<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        nodes_to_py(py, self.inner.velocities())
+    }
+    #[getter]
+    fn rest_positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        nodes_to_py(py, &self.inner.mesh().positions)
+    }
+    #[getter]
+    fn triangles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> {
+        let t = &self.inner.mesh().triangles;
+        let flat: Vec<i64> = t.iter().flat_map(|t| t.map(|i| i as i64)).collect();
+        numpy::ndarray::Array2::from_shape_vec((t.len(), 3), flat).expect("t x 3").to_pyarray(py)
+    }
+    #[getter]
+    fn masses(&self) -> Vec<f64> {
+        self.inner.masses().to_vec()
+    }
+    #[getter]
+    fn attachment_nodes(&self) -> Vec<usize> {
+        self.inner.attachment_nodes().to_vec()
+    }
+    #[getter]
+    fn attachment_targets<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        nodes_to_py(py, self.inner.attachment_targets())
+    }
+    #[getter]
+    fn handles(&self) -> Vec<usize> {
+        self.inner.handles().to_vec()
+    }
+    #[getter]
+    fn effects(&self) -> Vec<&'static str> {
+        self.inner.effects().names()
+    }
+    #[getter]
+    fn time(&self) -> f64 {
+        self.inner.time()
+    }
+    #[getter]
+    fn step_count(&self) -> u64 {
+        self.inner.step_count()
+    }
+    #[getter]
+    fn num_nodes(&self) -> usize {
+        self.inner.num_nodes()
+    }
+
+    fn params<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let p = self.inner.params();
+        let d = PyDict::new(py);
+        d.set_item("h", p.h)?;
+        d.set_item("density", p.density)?;
+        d.set_item("k_stretch", p.k_stretch)?;
+        d.set_item("k_bend", p.k_bend)?;
+        d.set_item("k_attach", p.k_attach)?;
+        d.set_item("gravity", p.gravity.as_slice().to_vec())?;
+        d.set_item("wind_direction", p.wind_direction.as_slice().to_vec())?;
+        d.set_item("wind_omega", p.wind_omega)?;
+        d.set_item("wind_phi", p.wind_phi)?;
+        Ok(d)
+    }
+
+    /// Updates physical parameters by name; unknown names and bad values raise.
+    #[pyo3(signature = (**kwargs))]
+    fn set_params(&mut self, py: Python<'_>, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<()> {
+        let mut p: Params = self.inner.params().clone();
+        if let Some(kwargs) = kwargs {
+            for (key, value) in kwargs.iter() {
+                let key: String = key.extract()?;
+                let vec3 = |v: &Bound<'_, PyAny>| -> PyResult<Vec3> {
+                    let a: [f64; 3] = v
+                        .extract()
+                        .map_err(|_| raise(py, "ParameterError", format!("{key} must be 3 numbers")))?;
+                    Ok(Vec3::from(a))
+                };
+                let scalar = |v: &Bound<'_, PyAny>| -> PyResult<f64> {
+                    v.extract().map_err(|_| raise(py, "ParameterError", format!("{key} must be a number")))
+                };
+                match key.as_str() {
+                    "h" => p.h = scalar(&value)?,
+                    "density" => p.density = scalar(&value)?,
+                    "k_stretch" => p.k_stretch = scalar(&value)?,
+                    "k_bend" => p.k_bend = scalar(&value)?,
+                    "k_attach" => p.k_attach = scalar(&value)?,
+                    "gravity" => p.gravity = vec3(&value)?,
+                    "wind_direction" => p.wind_direction = vec3(&value)?,
+                    "wind_omega" => p.wind_omega = scalar(&value)?,
+                    "wind_phi" => p.wind_phi = scalar(&value)?,
+                    other => {
+                        return Err(raise(
+                            py,
+                            "ParameterError",
+                            format!(
+                                "unknown parameter {other:?}; known: h, density, k_stretch, k_bend, k_attach, \
+                                 gravity, wind_direction, wind_omega, wind_phi"
+                            ),
+                        ))
+                    }
+                }
+            }
+        }
+        let sim = &mut self.inner;
+        guarded(py, || sim.set_params(p))
+    }
+
+    fn solver<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let s = self.inner.solver();
+        let d = PyDict::new(py);
+        d.set_item("max_iterations", s.max_iterations)?;
+        d.set_item("tolerance", s.tolerance)?;
+        d.set_item("acceleration", if s.anderson { "anderson" } else { "none" })?;
+        d.set_item("history", s.history)?;
+        d.set_item("parallel", s.parallel)?;
+        Ok(d)
+    }
+
+    /// Updates solver settings by name (max_iterations, tolerance, acceleration, history, parallel).
+    #[pyo3(signature = (**kwargs))]
+    fn set_solver(&mut self, py: Python<'_>, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<()> {
+        let mut s: SolverSettings = self.inner.solver().clone();
+        if let Some(kwargs) = kwargs {
+            for (key, value) in kwargs.iter() {
+                let key: String = key.extract()?;
+                let bad = |what: &str| raise(py, "ParameterError", format!("{key} must be {what}"));
+                match key.as_str() {
+                    "max_iterations" => s.max_iterations = value.extract().map_err(|_| bad("a positive integer"))?,
+                    "tolerance" => s.tolerance = value.extract().map_err(|_| bad("a number"))?,
+                    "history" => s.history = value.extract().map_err(|_| bad("an integer"))?,
+                    "parallel" => s.parallel = value.extract().map_err(|_| bad("a bool"))?,
+                    "acceleration" => {
+                        let a: String = value.extract().map_err(|_| bad("\"anderson\" or \"none\""))?;
+                        s.anderson = match a.as_str() {
+                            "anderson" => true,
+                            "none" => false,
+                            _ => return Err(bad("\"anderson\" or \"none\"")),
+                        };
+                    }
+                    other => {
+                        return Err(raise(
+                            py,
+                            "ParameterError",
+                            format!("unknown solver setting {other:?}; known: max_iterations, tolerance, acceleration, history, parallel"),
+                        ))
+                    }
+                }
+            }
+        }
+        let sim = &mut self.inner;
+        guarded(py, || sim.set_solver(s))
+    }
+
+    /// Per-stage wall time (seconds) and counters accumulated since the last reset_profile().
+    fn profile<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        for (k, v) in self.inner.profile().entries() {
+            d.set_item(k, v)?;
+        }
+        Ok(d)
+    }
+
+    fn reset_profile(&mut self) {
+        self.inner.reset_profile();
+    }
+
+    fn last_step<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        stats_dict(py, self.inner.last_step())
+    }
+
+    /// Kinetic + gravitational + elastic energy of the current state.
+    fn mechanical_energy(&mut self) -> f64 {
+        self.inner.mechanical_energy()
+    }
+
+    /// Principal stretches (s1 >= s2) of every triangle at the current state, shape (t, 2).
+    fn principal_stretches<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let s = self.inner.stretch().map(|s| s.principal_stretches(self.inner.positions())).unwrap_or_default();
+        let flat: Vec<f64> = s.iter().flat_map(|&(a, b)| [a, b]).collect();
+        numpy::ndarray::Array2::from_shape_vec((s.len(), 2), flat).expect("t x 2").to_pyarray(py)
+    }
+
+    /// Writes the current state as an OBJ file.
+    fn write_obj(&self, py: Python<'_>, path: &str) -> PyResult<()> {
+        let sim = &self.inner;
+        guarded(py, || diffcloth::mesh::write_obj(Path::new(path), sim.mesh(), sim.positions()))
+    }
+}
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PySimulator>()?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

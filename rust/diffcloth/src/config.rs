@@ -1,0 +1,235 @@
+//! Scene configuration as read from `configs/*.toml` (or a Python dict). Unknown keys are
+//! errors that name the key: a typo must never silently fall back to a default.
+
+use crate::error::{Error, Result};
+use crate::mesh::GridPlane;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// A whole scene: mesh, material, time step, the effects it simulates and their parameters.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneConfig {
+    /// Scene name (informational).
+    #[serde(default)]
+    pub name: String,
+    /// Time step h in seconds.
+    pub h: f64,
+    /// Default episode length in steps (used by environments and benchmarks).
+    #[serde(default = "default_steps")]
+    pub steps: usize,
+    /// The effects this scene simulates; anything not listed is not computed.
+    pub effects: Vec<Effect>,
+    pub mesh: MeshConfig,
+    /// Rigid placement of the mesh applied after loading/generation.
+    #[serde(default)]
+    pub placement: Placement,
+    pub material: MaterialConfig,
+    /// Gravitational acceleration in m/s^2 (default `[0, -9.8, 0]`). Used if `gravity` is on.
+    #[serde(default = "default_gravity")]
+    pub gravity: [f64; 3],
+    pub attachments: Option<AttachmentConfig>,
+    pub wind: Option<WindConfig>,
+    #[serde(default)]
+    pub solver: SolverConfig,
+}
+
+/// A physical effect a scene can switch on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Effect {
+    Gravity,
+    Stretch,
+    Bend,
+    Attachments,
+    Wind,
+    /// Per-node forces passed to each step.
+    ExternalForces,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+pub enum MeshConfig {
+    /// A rectangular `rows x cols` node grid of `width x height` metres.
+    Grid { rows: usize, cols: usize, width: f64, height: f64, plane: GridPlane },
+    /// The procedural hat (crown + brim, ~600 nodes) sized for a head sphere of radius 2.1.
+    Hat {},
+    /// The procedural sock (tube with a heel bend, closed toe, ~1000 nodes).
+    Sock {},
+    /// A user mesh; a relative `path` is resolved against the config file's folder.
+    Obj { path: PathBuf },
+}
+
+/// `p -> rotation(rotate_deg, applied x then y then z) * (scale * p) + translate`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Placement {
+    #[serde(default = "one")]
+    pub scale: f64,
+    /// Rotation about x, y, z in degrees.
+    #[serde(default)]
+    pub rotate_deg: [f64; 3],
+    #[serde(default)]
+    pub translate: [f64; 3],
+}
+
+impl Default for Placement {
+    fn default() -> Self {
+        Self { scale: 1.0, rotate_deg: [0.0; 3], translate: [0.0; 3] }
+    }
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialConfig {
+    /// Area density in kg/m^2 (lumped mass = density x one third of incident areas).
+    pub density: f64,
+    /// Stretch stiffness in N/m (weight = k_stretch x rest area). Default 0.
+    #[serde(default)]
+    pub k_stretch: f64,
+    /// Bending stiffness in N m (weight = k_bend x vertex area). Default 0.
+    #[serde(default)]
+    pub k_bend: f64,
+    /// Principal-stretch limits `[s_min, s_max]`; `[1, 1]` (default) is as-rigid-as-possible.
+    #[serde(default = "unit_limits")]
+    pub strain_limits: [f64; 2],
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AttachmentConfig {
+    /// Spring stiffness of each attachment in N/m (default 1e4, as the reference code).
+    #[serde(default = "default_attach_stiffness")]
+    pub stiffness: f64,
+    /// Attached node indices, or
+    #[serde(default)]
+    pub nodes: Vec<usize>,
+    /// a named selection: "top_corners" (grid), "handles" (garments).
+    #[serde(default)]
+    pub select: Option<String>,
+}
+
+/// Wind after the paper's Appendix B (Eqn. 35 and the T-shirt sinusoid):
+/// `f_a(t) = 0.5 (sin(omega t + phi) + 1) k_a d`, scaled by the node's area if
+/// `per_area` (default: then `d` is a force per unit area and the scene's response does not
+/// depend on the mesh resolution), else applied per node as in the paper.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WindConfig {
+    /// Amplitude vector d (N/m^2 if `per_area`, else N per node).
+    pub direction: [f64; 3],
+    /// Angular frequency omega in rad/s.
+    #[serde(default)]
+    pub omega: f64,
+    /// Phase phi in rad.
+    #[serde(default)]
+    pub phi: f64,
+    /// "uniform" (k_a = 1, default) or "inverse_distance" (k_a = 1 / distance of the node to
+    /// the mesh centroid at the first step, as the paper's Flag).
+    #[serde(default = "default_profile")]
+    pub profile: String,
+    #[serde(default = "yes")]
+    pub per_area: bool,
+}
+
+/// PD solver settings: the accuracy knobs.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SolverConfig {
+    /// Iteration cap per step (default 300).
+    #[serde(default = "default_max_iterations")]
+    pub max_iterations: usize,
+    /// Stop when the RMS per-coordinate PD update `|G(x) - x|` falls below this, in metres
+    /// (default 1e-8). `G(x) - x = -P^{-1} grad E(x)`: a preconditioned gradient norm.
+    #[serde(default = "default_tolerance")]
+    pub tolerance: f64,
+    /// "anderson" (default) or "none" (plain local-global).
+    #[serde(default = "default_acceleration")]
+    pub acceleration: String,
+    /// Anderson history length (default 5).
+    #[serde(default = "default_history")]
+    pub history: usize,
+    /// Parallel local step for large meshes (default true).
+    #[serde(default = "yes")]
+    pub parallel: bool,
+}
+
+impl Default for SolverConfig {
+    fn default() -> Self {
+        Self {
+            max_iterations: default_max_iterations(),
+            tolerance: default_tolerance(),
+            acceleration: default_acceleration(),
+            history: default_history(),
+            parallel: true,
+        }
+    }
+}
+
+fn default_steps() -> usize {
+    100
+}
+fn default_gravity() -> [f64; 3] {
+    [0.0, -9.8, 0.0]
+}
+fn one() -> f64 {
+    1.0
+}
+fn yes() -> bool {
+    true
+}
+fn unit_limits() -> [f64; 2] {
+    [1.0, 1.0]
+}
+fn default_attach_stiffness() -> f64 {
+    1e4
+}
+fn default_profile() -> String {
+    "uniform".into()
+}
+fn default_max_iterations() -> usize {
+    300
+}
+fn default_tolerance() -> f64 {
+    1e-8
+}
+fn default_acceleration() -> String {
+    "anderson".into()
+}
+fn default_history() -> usize {
+    5
+}
+
+impl SceneConfig {
+    /// Parses a TOML scene file; relative mesh paths are resolved against its folder.
+    pub fn from_toml_file(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Error::Io { path: path.display().to_string(), message: e.to_string() })?;
+        let mut cfg: Self = toml::from_str(&text).map_err(|e| Error::Config(format!("{}: {e}", path.display())))?;
+        cfg.resolve_paths(path.parent().unwrap_or(Path::new(".")));
+        Ok(cfg)
+    }
+
+    pub fn from_toml_str(text: &str) -> Result<Self> {
+        toml::from_str(text).map_err(|e| Error::Config(e.to_string()))
+    }
+
+    /// Parses JSON (what the Python layer sends); relative paths resolve against `base_dir`.
+    pub fn from_json_str(text: &str, base_dir: &Path) -> Result<Self> {
+        let mut cfg: Self = serde_json::from_str(text).map_err(|e| Error::Config(e.to_string()))?;
+        cfg.resolve_paths(base_dir);
+        Ok(cfg)
+    }
+
+    fn resolve_paths(&mut self, base: &Path) {
+        if let MeshConfig::Obj { path } = &mut self.mesh {
+            if path.is_relative() {
+                *path = base.join(&*path);
+            }
+        }
+    }
+
+    pub fn has(&self, effect: Effect) -> bool {
+        self.effects.contains(&effect)
+    }
+}

@@ -1,0 +1,244 @@
+//! In-plane stretch with strain limiting, one constraint per triangle.
+//!
+//! `A_i x = F = D_s D_m^{-1}` (3x2), `D_s = [x_1 - x_0, x_2 - x_0]`, `D_m` the rest edges in the
+//! triangle's own 2D frame. The projection is `U clamp(Sigma, s_min, s_max) V^T`
+//! (as-rigid-as-possible for `s_min = s_max = 1`), and `w_i = k_stretch * rest area`.
+
+use super::{PdConstraints, PARALLEL_MIN_CONSTRAINTS};
+use crate::mesh::TriMesh;
+use crate::Vec3;
+use nalgebra::{Matrix2, Matrix3x2, Vector2};
+use rayon::prelude::*;
+
+pub type Mat32 = Matrix3x2<f64>;
+
+pub struct Stretch {
+    triangles: Vec<[usize; 3]>,
+    /// `F = sum_l x_l b_l^T`: row `l` of `[[-1,-1],[1,0],[0,1]] D_m^{-1}`.
+    shape: Vec<[Vector2<f64>; 3]>,
+    rest_area: Vec<f64>,
+    weight: Vec<f64>,
+    strain_min: f64,
+    strain_max: f64,
+    projection: Vec<Mat32>,
+    energy: Vec<f64>,
+}
+
+impl Stretch {
+    pub fn new(mesh: &TriMesh, k_stretch: f64, strain_min: f64, strain_max: f64) -> Self {
+        let mut shape = Vec::with_capacity(mesh.triangles.len());
+        let mut rest_area = Vec::with_capacity(mesh.triangles.len());
+        for tri in &mesh.triangles {
+            let [x0, x1, x2] = tri.map(|i| mesh.positions[i]);
+            let (e1, e2) = (x1 - x0, x2 - x0);
+            let u = e1.normalize();
+            let normal = e1.cross(&e2).normalize();
+            let w = normal.cross(&u);
+            // Rest edges in the triangle's own orthonormal frame (u, w).
+            let dm = Matrix2::new(e1.norm(), e2.dot(&u), 0.0, e2.dot(&w));
+            let dm_inv = dm.try_inverse().expect("TriMesh::new rejects degenerate triangles");
+            let b = |r: Vector2<f64>| (r.transpose() * dm_inv).transpose();
+            shape.push([b(Vector2::new(-1.0, -1.0)), b(Vector2::new(1.0, 0.0)), b(Vector2::new(0.0, 1.0))]);
+            rest_area.push(0.5 * dm[(0, 0)] * dm[(1, 1)].abs());
+        }
+        let n = mesh.triangles.len();
+        let mut s = Self {
+            triangles: mesh.triangles.clone(),
+            shape,
+            weight: vec![0.0; n],
+            rest_area,
+            strain_min,
+            strain_max,
+            projection: vec![Mat32::zeros(); n],
+            energy: vec![0.0; n],
+        };
+        s.set_stiffness(k_stretch);
+        s
+    }
+
+    pub fn set_stiffness(&mut self, k_stretch: f64) {
+        for (w, a) in self.weight.iter_mut().zip(&self.rest_area) {
+            *w = k_stretch * a;
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.triangles.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+
+    /// Deformation gradient of triangle `t` at `x`.
+    pub fn deformation_gradient(&self, t: usize, x: &[Vec3]) -> Mat32 {
+        let tri = &self.triangles[t];
+        let b = &self.shape[t];
+        let mut f = Mat32::zeros();
+        for l in 0..3 {
+            f += x[tri[l]] * b[l].transpose();
+        }
+        f
+    }
+
+    /// Singular values of every triangle's deformation gradient at `x` (principal stretches).
+    pub fn principal_stretches(&self, x: &[Vec3]) -> Vec<(f64, f64)> {
+        (0..self.len())
+            .map(|t| {
+                let (s1, s2, _, _) = singular_2d(&self.deformation_gradient(t, x));
+                (s1, s2)
+            })
+            .collect()
+    }
+}
+
+impl PdConstraints for Stretch {
+    fn add_system_triplets(&self, out: &mut Vec<(usize, usize, f64)>) {
+        for ((tri, b), &w) in self.triangles.iter().zip(&self.shape).zip(&self.weight) {
+            for a in 0..3 {
+                for c in 0..3 {
+                    out.push((tri[a], tri[c], w * b[a].dot(&b[c])));
+                }
+            }
+        }
+    }
+
+    fn project(&mut self, x: &[Vec3], parallel: bool) -> f64 {
+        let (lo, hi) = (self.strain_min, self.strain_max);
+        // Move the output buffers out so `work` can borrow the geometry (no allocation).
+        let (mut projection, mut energy) = (std::mem::take(&mut self.projection), std::mem::take(&mut self.energy));
+        let this = &*self;
+        let work = |(t, (p, e)): (usize, (&mut Mat32, &mut f64))| {
+            let f = this.deformation_gradient(t, x);
+            *p = project_singular_values(&f, lo, hi);
+            *e = 0.5 * this.weight[t] * (f - *p).norm_squared();
+        };
+        if parallel && projection.len() >= PARALLEL_MIN_CONSTRAINTS {
+            projection.par_iter_mut().zip(energy.par_iter_mut()).enumerate().for_each(work);
+        } else {
+            projection.iter_mut().zip(energy.iter_mut()).enumerate().for_each(work);
+        }
+        (self.projection, self.energy) = (projection, energy);
+        // Serial sum: bitwise identical whatever the thread count.
+        self.energy.iter().sum()
+    }
+
+    fn add_rhs(&self, rhs: &mut [Vec3]) {
+        for (t, tri) in self.triangles.iter().enumerate() {
+            let wp = self.weight[t] * self.projection[t];
+            for l in 0..3 {
+                rhs[tri[l]] += wp * self.shape[t][l];
+            }
+        }
+    }
+}
+
+/// Singular values `s1 >= s2 >= 0` and right singular vectors of a 3x2 matrix, in closed form
+/// from the 2x2 eigenproblem of `F^T F` (a few flops; no iterative SVD in the hot loop).
+fn singular_2d(f: &Mat32) -> (f64, f64, Vector2<f64>, Vector2<f64>) {
+    let (c0, c1) = (f.column(0), f.column(1));
+    let (a, b, c) = (c0.dot(&c0), c0.dot(&c1), c1.dot(&c1));
+    let half_trace = 0.5 * (a + c);
+    let disc = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+    let s1 = (half_trace + disc).sqrt();
+    let s2 = (half_trace - disc).max(0.0).sqrt();
+    // Eigenvector of the larger eigenvalue of [[a, b], [b, c]] at angle atan2(2b, a - c) / 2.
+    let (sin, cos) = (0.5 * (2.0 * b).atan2(a - c)).sin_cos();
+    (s1, s2, Vector2::new(cos, sin), Vector2::new(-sin, cos))
+}
+
+/// Closest matrix to `f` (Frobenius) whose singular values lie in `[lo, hi]`:
+/// `U clamp(Sigma, lo, hi) V^T`.
+pub fn project_singular_values(f: &Mat32, lo: f64, hi: f64) -> Mat32 {
+    let (s1, s2, v1, v2) = singular_2d(f);
+    let (t1, t2) = (s1.clamp(lo, hi), s2.clamp(lo, hi));
+    if s2 > 1e-8 * s1 {
+        // F V diag(t / s) V^T = U diag(t) V^T without forming U.
+        let scale = (t1 / s1) * v1 * v1.transpose() + (t2 / s2) * v2 * v2.transpose();
+        return f * scale;
+    }
+    // Rank-deficient F (collapsed triangle): U's columns are not unique; complete them.
+    let u1 = if s1 > 0.0 { f * v1 / s1 } else { Vec3::x() };
+    let mut u2 = f * v2;
+    u2 -= u1 * u1.dot(&u2);
+    if u2.norm() <= 1e-12 * s1.max(1e-300) {
+        let axis = u1.iamin();
+        let mut e = Vec3::zeros();
+        e[axis] = 1.0;
+        u2 = e - u1 * u1[axis];
+    }
+    let u2 = u2.normalize();
+    t1 * u1 * v1.transpose() + t2 * u2 * v2.transpose()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::energy::testing::*;
+    use crate::mesh::{grid, GridPlane};
+
+    fn random_f(seed: u64) -> Mat32 {
+        let v = jitter(&[Vec3::zeros(), Vec3::zeros()], 1.5, seed);
+        Mat32::from_columns(&[v[0], v[1]])
+    }
+
+    #[test]
+    fn projection_matches_svd_and_is_closest() {
+        for seed in 0..200 {
+            let f = random_f(seed);
+            let p = project_singular_values(&f, 0.9, 1.1);
+            let svd = f.svd(true, true);
+            let clamped = svd.singular_values.map(|s| s.clamp(0.9, 1.1));
+            let expected = svd.u.unwrap() * Matrix2::from_diagonal(&clamped) * svd.v_t.unwrap();
+            assert!((p - expected).norm() < 1e-10 * (1.0 + f.norm()), "seed {seed}");
+            // Its singular values are inside the limits ...
+            let sv = p.svd(false, false).singular_values;
+            assert!(sv.iter().all(|&s| (0.9 - 1e-12..=1.1 + 1e-12).contains(&s)));
+            // ... and no other member of the set we sample is closer.
+            for k in 0..20 {
+                let q = random_f(1000 + 20 * seed + k);
+                let qs = q.svd(true, true);
+                let member = qs.u.unwrap()
+                    * Matrix2::from_diagonal(&qs.singular_values.map(|s| s.clamp(0.9, 1.1)))
+                    * qs.v_t.unwrap();
+                assert!((f - p).norm() <= (f - member).norm() + 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn projection_handles_collapsed_triangles() {
+        let f = Mat32::from_columns(&[Vec3::new(1.0, 2.0, 0.0), Vec3::new(2.0, 4.0, 0.0)]);
+        let p = project_singular_values(&f, 1.0, 1.0);
+        assert!(p.iter().all(|v| v.is_finite()));
+        let sv = p.svd(false, false).singular_values;
+        assert!((sv[0] - 1.0).abs() < 1e-12 && (sv[1] - 1.0).abs() < 1e-12);
+        let p0 = project_singular_values(&Mat32::zeros(), 1.0, 1.0);
+        assert!((p0.transpose() * p0 - Matrix2::identity()).norm() < 1e-12);
+    }
+
+    #[test]
+    fn rest_shape_has_identity_stretch_and_zero_energy() {
+        let mesh = grid(4, 5, 2.0, 1.0, GridPlane::Xy).unwrap();
+        let mut s = Stretch::new(&mesh, 100.0, 1.0, 1.0);
+        assert!(s.project(&mesh.positions, false) < 1e-20);
+        for (s1, s2) in s.principal_stretches(&mesh.positions) {
+            assert!((s1 - 1.0).abs() < 1e-12 && (s2 - 1.0).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn energy_gradient_matches_finite_differences() {
+        let mesh = grid(4, 4, 1.0, 1.0, GridPlane::Xz).unwrap();
+        let x = jitter(&mesh.positions, 0.15, 7);
+        let mut arap = Stretch::new(&mesh, 30.0, 1.0, 1.0);
+        check_gradient_fd(&mut arap, &x, 1e-6);
+        let mut limited = Stretch::new(&mesh, 30.0, 0.95, 1.05);
+        check_gradient_fd(&mut limited, &x, 1e-6);
+        // Translation invariance: the selector rows sum to zero (momentum conservation).
+        let shifted: Vec<Vec3> = x.iter().map(|p| p + Vec3::new(3.0, -1.0, 2.0)).collect();
+        let (e0, _) = gradient(&mut arap, &x);
+        let (e1, _) = gradient(&mut arap, &shifted);
+        assert!((e0 - e1).abs() < 1e-10 * e0.max(1.0));
+    }
+}

@@ -1,0 +1,619 @@
+//! The simulator and its forward step (paper Sec. 3.1): implicit Euler solved by PD
+//! local-global iterations on the prefactored scalar matrix
+//! `P_s = M / h^2 + sum_i w_i A_i^T A_i`, accelerated by energy-guarded Anderson.
+
+use crate::anderson::Anderson;
+use crate::config::SceneConfig;
+use crate::effects::Effects;
+use crate::energy::{Attachments, Bend, PdConstraints, Stretch};
+use crate::error::{Error, Result};
+use crate::forces::Wind;
+use crate::linalg::SpdFactor;
+use crate::mesh::TriMesh;
+use crate::profile::{timed, Profile};
+use crate::scene::{attachment_nodes, build_mesh};
+use crate::Vec3;
+use std::time::Instant;
+
+/// Physical parameters that can change between steps. Changing any of the first five
+/// refactors the system matrix (once); the others only change right-hand sides.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Params {
+    /// Time step h in s.
+    pub h: f64,
+    /// Area density in kg/m^2.
+    pub density: f64,
+    /// Stretch stiffness in N/m.
+    pub k_stretch: f64,
+    /// Bending stiffness in N m.
+    pub k_bend: f64,
+    /// Attachment spring stiffness in N/m.
+    pub k_attach: f64,
+    /// Gravitational acceleration in m/s^2.
+    pub gravity: Vec3,
+    /// Wind amplitude vector d, angular frequency omega (rad/s), phase phi (rad).
+    pub wind_direction: Vec3,
+    pub wind_omega: f64,
+    pub wind_phi: f64,
+}
+
+/// Accuracy knobs of the PD solve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SolverSettings {
+    /// Iteration cap per step.
+    pub max_iterations: usize,
+    /// Stop when the RMS per-coordinate PD update `|G(x) - x|` is below this (metres).
+    pub tolerance: f64,
+    /// Energy-guarded Anderson acceleration on/off.
+    pub anderson: bool,
+    /// Anderson history length (1..=8).
+    pub history: usize,
+    /// Project constraints on all threads (for large meshes).
+    pub parallel: bool,
+}
+
+/// What one forward step did.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StepStats {
+    pub iterations: usize,
+    /// Final RMS PD update (metres).
+    pub residual: f64,
+    pub converged: bool,
+}
+
+/// Inputs of one step; `None` keeps the previous attachment targets / applies no force.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct StepInput<'a> {
+    pub attachment_targets: Option<&'a [Vec3]>,
+    pub external_forces: Option<&'a [Vec3]>,
+}
+
+pub struct Simulator {
+    config: SceneConfig,
+    mesh: TriMesh,
+    handles: Vec<usize>,
+    effects: Effects,
+    params: Params,
+    solver: SolverSettings,
+    node_area: Vec<f64>,
+    mass: Vec<f64>,
+    stretch: Option<Stretch>,
+    bend: Option<Bend>,
+    attachments: Option<Attachments>,
+    wind: Option<Wind>,
+    factor: SpdFactor,
+    // State.
+    x: Vec<Vec3>,
+    v: Vec<Vec3>,
+    time: f64,
+    step_count: u64,
+    // Work buffers, allocated once.
+    y: Vec<Vec3>,
+    inertia_rhs: Vec<Vec3>,
+    iterate: Vec<Vec3>,
+    mapped: Vec<Vec3>,
+    update: Vec<Vec3>,
+    extrapolated: Vec<Vec3>,
+    anderson: Anderson,
+    trace: Option<Vec<(f64, f64)>>,
+    profile: Profile,
+    last: StepStats,
+}
+
+impl Simulator {
+    pub fn new(config: &SceneConfig) -> Result<Self> {
+        let effects = Effects::from_config(config)?;
+        let placed = build_mesh(config)?;
+        let mesh = placed.mesh.clone();
+        let n = mesh.num_vertices();
+        let m = &config.material;
+        let s = &config.solver;
+        let wind_cfg = config.wind.as_ref();
+        let params = Params {
+            h: config.h,
+            density: m.density,
+            k_stretch: m.k_stretch,
+            k_bend: m.k_bend,
+            k_attach: config.attachments.as_ref().map_or(0.0, |a| a.stiffness),
+            gravity: Vec3::from(config.gravity),
+            wind_direction: wind_cfg.map_or(Vec3::zeros(), |w| Vec3::from(w.direction)),
+            wind_omega: wind_cfg.map_or(0.0, |w| w.omega),
+            wind_phi: wind_cfg.map_or(0.0, |w| w.phi),
+        };
+        validate_params(&params)?;
+        let [lo, hi] = m.strain_limits;
+        if !(lo > 0.0 && lo <= hi && hi.is_finite()) {
+            return Err(Error::Config(format!("material.strain_limits must satisfy 0 < min <= max, got [{lo}, {hi}]")));
+        }
+        let solver = SolverSettings {
+            max_iterations: s.max_iterations,
+            tolerance: s.tolerance,
+            anderson: match s.acceleration.as_str() {
+                "anderson" => true,
+                "none" => false,
+                other => {
+                    return Err(Error::Config(format!(
+                        "solver.acceleration must be \"anderson\" or \"none\", got {other:?}"
+                    )))
+                }
+            },
+            history: s.history,
+            parallel: s.parallel,
+        };
+        validate_solver(&solver)?;
+
+        let node_area = mesh.vertex_areas();
+        let stretch = effects.stretch.then(|| Stretch::new(&mesh, params.k_stretch, lo, hi));
+        let bend = effects.bend.then(|| Bend::new(&mesh, params.k_bend));
+        let attachments = match (&config.attachments, effects.attachments) {
+            (Some(a), true) => {
+                let nodes = attachment_nodes(a, &placed)?;
+                let targets = nodes.iter().map(|&j| mesh.positions[j]).collect();
+                Some(Attachments::new(nodes, params.k_attach, targets))
+            }
+            _ => None,
+        };
+        let wind = match (wind_cfg, effects.wind) {
+            (Some(w), true) => Some(Wind::new(w, &mesh.positions, &node_area)?),
+            _ => None,
+        };
+        let mass: Vec<f64> = node_area.iter().map(|a| params.density * a).collect();
+        let mut sim = Self {
+            config: config.clone(),
+            handles: placed.handles,
+            effects,
+            solver,
+            mass,
+            stretch,
+            bend,
+            attachments,
+            wind,
+            factor: SpdFactor::new(1, &[(0, 0, 1.0)])?,
+            x: mesh.positions.clone(),
+            v: vec![Vec3::zeros(); n],
+            time: 0.0,
+            step_count: 0,
+            y: vec![Vec3::zeros(); n],
+            inertia_rhs: vec![Vec3::zeros(); n],
+            iterate: vec![Vec3::zeros(); n],
+            mapped: vec![Vec3::zeros(); n],
+            update: vec![Vec3::zeros(); n],
+            extrapolated: vec![Vec3::zeros(); n],
+            anderson: Anderson::new(config.solver.history, n),
+            trace: None,
+            profile: Profile::default(),
+            last: StepStats::default(),
+            node_area,
+            params,
+            mesh,
+        };
+        sim.factor = SpdFactor::new(n, &sim.system_triplets())?;
+        Ok(sim)
+    }
+
+    /// Loads a TOML scene file.
+    pub fn from_toml_file(path: &std::path::Path) -> Result<Self> {
+        Self::new(&SceneConfig::from_toml_file(path)?)
+    }
+
+    fn constraint_sets(&mut self) -> impl Iterator<Item = &mut dyn PdConstraints> {
+        let s = self.stretch.as_mut().map(|c| c as &mut dyn PdConstraints);
+        let b = self.bend.as_mut().map(|c| c as &mut dyn PdConstraints);
+        let a = self.attachments.as_mut().map(|c| c as &mut dyn PdConstraints);
+        [s, b, a].into_iter().flatten()
+    }
+
+    /// Triplets of `P_s = M / h^2 + sum_i w_i A_i^T A_i`.
+    fn system_triplets(&mut self) -> Vec<(usize, usize, f64)> {
+        let inv_h2 = 1.0 / (self.params.h * self.params.h);
+        let mut t: Vec<(usize, usize, f64)> = self.mass.iter().enumerate().map(|(i, m)| (i, i, m * inv_h2)).collect();
+        for c in self.constraint_sets() {
+            c.add_system_triplets(&mut t);
+        }
+        t
+    }
+
+    // ---- accessors -------------------------------------------------------------------------
+
+    pub fn config(&self) -> &SceneConfig {
+        &self.config
+    }
+    pub fn mesh(&self) -> &TriMesh {
+        &self.mesh
+    }
+    pub fn handles(&self) -> &[usize] {
+        &self.handles
+    }
+    pub fn effects(&self) -> Effects {
+        self.effects
+    }
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+    pub fn solver(&self) -> &SolverSettings {
+        &self.solver
+    }
+    pub fn num_nodes(&self) -> usize {
+        self.mesh.num_vertices()
+    }
+    pub fn positions(&self) -> &[Vec3] {
+        &self.x
+    }
+    pub fn velocities(&self) -> &[Vec3] {
+        &self.v
+    }
+    pub fn masses(&self) -> &[f64] {
+        &self.mass
+    }
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+    pub fn step_count(&self) -> u64 {
+        self.step_count
+    }
+    pub fn profile(&self) -> &Profile {
+        &self.profile
+    }
+    pub fn reset_profile(&mut self) {
+        self.profile = Profile::default();
+    }
+    pub fn last_step(&self) -> StepStats {
+        self.last
+    }
+    pub fn stretch(&self) -> Option<&Stretch> {
+        self.stretch.as_ref()
+    }
+    pub fn attachment_nodes(&self) -> &[usize] {
+        self.attachments.as_ref().map_or(&[], |a| a.nodes())
+    }
+    pub fn attachment_targets(&self) -> &[Vec3] {
+        self.attachments.as_ref().map_or(&[], |a| a.targets())
+    }
+
+    /// Records `(energy, residual)` of every PD iteration of the next steps (for studies).
+    pub fn set_trace(&mut self, on: bool) {
+        self.trace = on.then(|| Vec::with_capacity(self.solver.max_iterations + 1));
+    }
+    /// The `(energy, residual)` per iteration of the last step, if tracing.
+    pub fn trace(&self) -> Option<&[(f64, f64)]> {
+        self.trace.as_deref()
+    }
+
+    // ---- state and parameters --------------------------------------------------------------
+
+    /// Sets the state (defaults: rest positions, zero velocity), time 0, attachment targets
+    /// back to the attached nodes' positions.
+    pub fn reset(&mut self, x: Option<&[Vec3]>, v: Option<&[Vec3]>) -> Result<()> {
+        let n = self.num_nodes();
+        if let Some(x) = x {
+            check_nodes("x", x, n)?;
+        }
+        if let Some(v) = v {
+            check_nodes("v", v, n)?;
+        }
+        self.x.copy_from_slice(x.unwrap_or(&self.mesh.positions));
+        match v {
+            Some(v) => self.v.copy_from_slice(v),
+            None => self.v.iter_mut().for_each(|vi| *vi = Vec3::zeros()),
+        }
+        if let Some(a) = self.attachments.as_mut() {
+            let targets: Vec<Vec3> = a.nodes().iter().map(|&j| self.x[j]).collect();
+            a.set_targets(&targets);
+        }
+        self.time = 0.0;
+        self.step_count = 0;
+        Ok(())
+    }
+
+    /// Replaces the physical parameters; refactors the system matrix only if h, density or a
+    /// stiffness changed. On error nothing is changed.
+    pub fn set_params(&mut self, params: Params) -> Result<()> {
+        validate_params(&params)?;
+        let old = std::mem::replace(&mut self.params, params.clone());
+        let refactor = old.h != params.h
+            || old.density != params.density
+            || old.k_stretch != params.k_stretch
+            || old.k_bend != params.k_bend
+            || old.k_attach != params.k_attach;
+        if refactor {
+            self.apply_matrix_params();
+            let start = Instant::now();
+            let triplets = self.system_triplets();
+            if let Err(e) = self.factor.refactor(&triplets) {
+                self.params = old;
+                self.apply_matrix_params();
+                return Err(e);
+            }
+            self.profile.refactorizations += 1;
+            self.profile.refactor += start.elapsed();
+        }
+        if let Some(w) = self.wind.as_mut() {
+            w.direction = params.wind_direction;
+            w.omega = params.wind_omega;
+            w.phi = params.wind_phi;
+        }
+        Ok(())
+    }
+
+    fn apply_matrix_params(&mut self) {
+        let p = self.params.clone();
+        self.mass.iter_mut().zip(&self.node_area).for_each(|(m, a)| *m = p.density * a);
+        if let Some(s) = self.stretch.as_mut() {
+            s.set_stiffness(p.k_stretch);
+        }
+        if let Some(b) = self.bend.as_mut() {
+            b.set_stiffness(p.k_bend);
+        }
+        if let Some(a) = self.attachments.as_mut() {
+            a.set_stiffness(p.k_attach);
+        }
+    }
+
+    pub fn set_solver(&mut self, solver: SolverSettings) -> Result<()> {
+        validate_solver(&solver)?;
+        if solver.history != self.solver.history {
+            self.anderson = Anderson::new(solver.history, self.num_nodes());
+        }
+        if self.trace.is_some() {
+            self.trace = Some(Vec::with_capacity(solver.max_iterations + 1));
+        }
+        self.solver = solver;
+        Ok(())
+    }
+
+    // ---- the step --------------------------------------------------------------------------
+
+    /// Advances one implicit-Euler step. On error the state is unchanged.
+    pub fn step(&mut self, input: StepInput<'_>) -> Result<StepStats> {
+        let start = Instant::now();
+        let (local0, global0) = (self.profile.local, self.profile.global);
+        self.prepare(input)?;
+        let stats = self.solve_pd();
+        // The PD result is in `mapped`.
+        let h = self.params.h;
+        if !self.mapped.iter().all(|p| p.iter().all(|c| c.is_finite())) {
+            return Err(Error::Diverged(format!(
+                "non-finite positions at step {}; state left at the previous step",
+                self.step_count
+            )));
+        }
+        for ((x, v), xn) in self.x.iter_mut().zip(self.v.iter_mut()).zip(&self.mapped) {
+            *v = (xn - *x) / h;
+            *x = *xn;
+        }
+        self.time += h;
+        self.step_count += 1;
+        self.last = stats;
+        let p = &mut self.profile;
+        p.steps += 1;
+        p.iterations += stats.iterations as u64;
+        p.unconverged_steps += u64::from(!stats.converged);
+        let total = start.elapsed();
+        p.total += total;
+        p.other += total.saturating_sub((p.local - local0) + (p.global - global0));
+        Ok(stats)
+    }
+
+    /// Validates the inputs and computes the inertial prediction
+    /// `y = x + h v + h^2 M^{-1} f_ext` and `M y / h^2`.
+    pub fn prepare(&mut self, input: StepInput<'_>) -> Result<()> {
+        let n = self.num_nodes();
+        if let Some(t) = input.attachment_targets {
+            let Some(a) = self.attachments.as_mut() else {
+                return Err(Error::Input("attachment targets given but the scene has no attachments".into()));
+            };
+            check_nodes("attachment_targets", t, a.nodes().len())?;
+            a.set_targets(t);
+        }
+        if let Some(f) = input.external_forces {
+            if !self.effects.external_forces {
+                return Err(Error::Input(
+                    "external forces given but 'external_forces' is not in the scene's effects".into(),
+                ));
+            }
+            check_nodes("external_forces", f, n)?;
+        }
+        let h = self.params.h;
+        // Accumulate forces in `y` first, then turn them into the prediction.
+        let f = &mut self.y;
+        match input.external_forces {
+            Some(ext) => f.copy_from_slice(ext),
+            None => f.iter_mut().for_each(|fi| *fi = Vec3::zeros()),
+        }
+        if self.effects.gravity {
+            let g = self.params.gravity;
+            f.iter_mut().zip(&self.mass).for_each(|(fi, m)| *fi += *m * g);
+        }
+        if let Some(w) = &self.wind {
+            w.add_forces(self.time, f);
+        }
+        let inv_h2 = 1.0 / (h * h);
+        for i in 0..n {
+            let y = self.x[i] + h * self.v[i] + (h * h / self.mass[i]) * self.y[i];
+            self.y[i] = y;
+            self.inertia_rhs[i] = self.mass[i] * inv_h2 * y;
+        }
+        Ok(())
+    }
+
+    /// Local step at `x`: projects every constraint, writes `M y / h^2 + sum_i w_i A_i^T p_i`
+    /// into `rhs` and returns the implicit-Euler objective
+    /// `E(x) = |x - y|_M^2 / (2 h^2) + sum_i w_i / 2 |A_i x - p_i|^2`.
+    fn local_step(&mut self, which: Buffer) -> f64 {
+        let start = Instant::now();
+        let parallel = self.solver.parallel;
+        let x = std::mem::take(self.buffer(which));
+        let mut rhs = std::mem::take(&mut self.update);
+        rhs.copy_from_slice(&self.inertia_rhs);
+        let inv_2h2 = 0.5 / (self.params.h * self.params.h);
+        let mut energy: f64 =
+            x.iter().zip(&self.y).zip(&self.mass).map(|((xi, yi), m)| m * (xi - yi).norm_squared()).sum::<f64>() * inv_2h2;
+        for c in self.constraint_sets() {
+            energy += c.project(&x, parallel);
+            c.add_rhs(&mut rhs);
+        }
+        *self.buffer(which) = x;
+        self.update = rhs;
+        self.profile.local += start.elapsed();
+        energy
+    }
+
+    fn buffer(&mut self, which: Buffer) -> &mut Vec<Vec3> {
+        match which {
+            Buffer::Iterate => &mut self.iterate,
+            Buffer::Extrapolated => &mut self.extrapolated,
+        }
+    }
+
+    /// Global step: `mapped = P_s^{-1} rhs` (rhs in `update`), then `update = mapped - iterate`.
+    /// Returns the RMS of the update.
+    fn global_step(&mut self) -> f64 {
+        let factor = &mut self.factor;
+        timed(&mut self.profile.global, || factor.solve_xyz(&mut self.update));
+        let mut sum = 0.0;
+        for ((u, g), x) in self.update.iter_mut().zip(self.mapped.iter_mut()).zip(&self.iterate) {
+            *g = *u;
+            *u -= x;
+            sum += u.norm_squared();
+        }
+        (sum / (3 * self.iterate.len()) as f64).sqrt()
+    }
+
+    /// PD iterations from the initial guess `y`. Each iteration maps the iterate x to
+    /// `G(x) = P^{-1}(M y / h^2 + sum w A^T p(x))`, which never raises the energy E; an Anderson
+    /// extrapolation is kept only if it lowers E below the last accepted iterate's, otherwise
+    /// the plain step `G(x)` is taken and the history restarts (Peng et al. 2018).
+    fn solve_pd(&mut self) -> StepStats {
+        self.iterate.copy_from_slice(&self.y);
+        self.anderson.reset();
+        if let Some(t) = self.trace.as_mut() {
+            t.clear();
+        }
+        let tol = self.solver.tolerance;
+        let max_it = self.solver.max_iterations;
+        let mut energy = self.local_step(Buffer::Iterate);
+        let mut residual = self.global_step();
+        let mut iterations = 1;
+        self.record(energy, residual);
+        while residual > tol && iterations < max_it {
+            let mut accepted = false;
+            if self.solver.anderson {
+                self.anderson.push(&self.update, &self.mapped);
+                if self.anderson.extrapolate(&self.update, &self.mapped, &mut self.extrapolated) {
+                    let trial = self.local_step(Buffer::Extrapolated);
+                    if trial < energy {
+                        std::mem::swap(&mut self.iterate, &mut self.extrapolated);
+                        energy = trial;
+                        accepted = true;
+                    } else {
+                        self.profile.acceleration_rejections += 1;
+                        self.anderson.reset();
+                    }
+                }
+            }
+            if !accepted {
+                self.iterate.copy_from_slice(&self.mapped);
+                energy = self.local_step(Buffer::Iterate);
+            }
+            residual = self.global_step();
+            iterations += 1;
+            self.record(energy, residual);
+        }
+        StepStats { iterations, residual, converged: residual <= tol }
+    }
+
+    fn record(&mut self, energy: f64, residual: f64) {
+        if let Some(t) = self.trace.as_mut() {
+            if t.len() < t.capacity() {
+                t.push((energy, residual));
+            }
+        }
+    }
+
+    /// Objective `E(x)` of the implicit step prepared by [`Simulator::prepare`] and its exact
+    /// gradient `P x - rhs(x)` (what PD minimizes; used by tests and studies).
+    pub fn step_objective(&mut self, x: &[Vec3]) -> (f64, Vec<Vec3>) {
+        self.iterate.copy_from_slice(x);
+        let e = self.local_step(Buffer::Iterate);
+        let mut grad = vec![Vec3::zeros(); x.len()];
+        self.factor.mul_xyz(x, &mut grad);
+        for (g, r) in grad.iter_mut().zip(&self.update) {
+            *g -= r;
+        }
+        (e, grad)
+    }
+
+    /// Solves the prepared step and returns its positions without advancing the state.
+    pub fn solve_prepared(&mut self) -> (Vec<Vec3>, StepStats) {
+        let stats = self.solve_pd();
+        (self.mapped.clone(), stats)
+    }
+
+    /// Total mechanical energy: kinetic + gravitational + elastic at the current state.
+    pub fn mechanical_energy(&mut self) -> f64 {
+        let kinetic: f64 = self.v.iter().zip(&self.mass).map(|(v, m)| 0.5 * m * v.norm_squared()).sum();
+        let potential: f64 = if self.effects.gravity {
+            -self.x.iter().zip(&self.mass).map(|(x, m)| m * self.params.gravity.dot(x)).sum::<f64>()
+        } else {
+            0.0
+        };
+        let x = self.x.clone();
+        let elastic: f64 = self.constraint_sets().map(|c| c.project(&x, false)).sum();
+        kinetic + potential + elastic
+    }
+}
+
+#[derive(Clone, Copy)]
+enum Buffer {
+    Iterate,
+    Extrapolated,
+}
+
+fn check_nodes(name: &str, values: &[Vec3], expected: usize) -> Result<()> {
+    if values.len() != expected {
+        return Err(Error::Input(format!("{name} must have {expected} rows (one per node), got {}", values.len())));
+    }
+    if let Some(i) = values.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        return Err(Error::Input(format!("{name} row {i} is not finite: {:?}", values[i].as_slice())));
+    }
+    Ok(())
+}
+
+fn validate_params(p: &Params) -> Result<()> {
+    let positive = [("h", p.h), ("density", p.density)];
+    for (name, v) in positive {
+        if !(v > 0.0 && v.is_finite()) {
+            return Err(Error::Param(format!("{name} must be positive and finite, got {v}")));
+        }
+    }
+    let non_negative = [("k_stretch", p.k_stretch), ("k_bend", p.k_bend), ("k_attach", p.k_attach)];
+    for (name, v) in non_negative {
+        if !(v >= 0.0 && v.is_finite()) {
+            return Err(Error::Param(format!("{name} must be non-negative and finite, got {v}")));
+        }
+    }
+    let finite = p.gravity.iter().chain(p.wind_direction.iter()).all(|c| c.is_finite())
+        && p.wind_omega.is_finite()
+        && p.wind_phi.is_finite();
+    if !finite {
+        return Err(Error::Param("gravity and wind parameters must be finite".into()));
+    }
+    Ok(())
+}
+
+fn validate_solver(s: &SolverSettings) -> Result<()> {
+    if s.max_iterations == 0 {
+        return Err(Error::Param("solver max_iterations must be at least 1".into()));
+    }
+    if !(s.tolerance >= 0.0 && s.tolerance.is_finite()) {
+        return Err(Error::Param(format!("solver tolerance must be non-negative and finite, got {}", s.tolerance)));
+    }
+    if !(1..=crate::anderson::MAX_HISTORY).contains(&s.history) {
+        return Err(Error::Param(format!(
+            "solver history must be in 1..={}, got {}",
+            crate::anderson::MAX_HISTORY,
+            s.history
+        )));
+    }
+    Ok(())
+}

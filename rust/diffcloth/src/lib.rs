@@ -1,0 +1,29 @@
+//! diffcloth: a differentiable projective-dynamics cloth simulator (after DiffCloth, Li et al.
+//! 2022). Data flows one way: config -> scene (mesh, material, effects) -> [`Simulator`]
+//! forward steps. See `DESIGN.md` for the physics.
+
+pub mod anderson;
+pub mod config;
+pub mod effects;
+pub mod energy;
+pub mod error;
+pub mod forces;
+pub mod forward;
+pub mod linalg;
+pub mod mesh;
+pub mod profile;
+pub mod scene;
+
+/// 3-vectors are nalgebra's (node positions, velocities, forces).
+pub type Vec3 = nalgebra::Vector3<f64>;
+
+pub use config::{Effect, SceneConfig};
+pub use error::{Error, Result};
+pub use forward::{Params, Simulator, SolverSettings, StepInput, StepStats};
+pub use profile::Profile;
+
+/// Use one thread inside faer: its parallel sparse kernels are slower than sequential at cloth
+/// sizes (STACK.md); parallelism comes from the local step and from batched environments.
+pub fn init_linear_algebra() {
+    faer::set_global_parallelism(faer::Par::Seq);
+}

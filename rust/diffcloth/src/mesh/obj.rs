@@ -1,0 +1,116 @@
+//! Wavefront OBJ import/export (vertices and faces; polygons are fan-triangulated).
+
+use super::TriMesh;
+use crate::error::{Error, Result};
+use crate::Vec3;
+use std::fmt::Write as _;
+
+/// Reads an OBJ file's `v` and `f` records. Face entries may be `i`, `i/t`, `i//n` or `i/t/n`,
+/// with negative (relative) indices allowed; other records are ignored.
+pub fn read_obj(path: &std::path::Path) -> Result<TriMesh> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::Io { path: path.display().to_string(), message: e.to_string() })?;
+    parse_obj(&text).map_err(|e| match e {
+        Error::Mesh(msg) => Error::Mesh(format!("{}: {msg}", path.display())),
+        other => other,
+    })
+}
+
+/// Parses OBJ text (see [`read_obj`]).
+pub fn parse_obj(text: &str) -> Result<TriMesh> {
+    let mut positions = Vec::new();
+    let mut triangles = Vec::new();
+    for (lineno, line) in text.lines().enumerate() {
+        let mut fields = line.split_whitespace();
+        match fields.next() {
+            Some("v") => {
+                let coords: Vec<f64> = fields
+                    .take(3)
+                    .map(|s| s.parse::<f64>())
+                    .collect::<std::result::Result<_, _>>()
+                    .map_err(|e| Error::Mesh(format!("line {}: bad vertex: {e}", lineno + 1)))?;
+                if coords.len() != 3 {
+                    return Err(Error::Mesh(format!("line {}: vertex needs 3 coordinates", lineno + 1)));
+                }
+                positions.push(Vec3::new(coords[0], coords[1], coords[2]));
+            }
+            Some("f") => {
+                let mut face = Vec::with_capacity(4);
+                for entry in fields {
+                    let index: i64 = entry.split('/').next().unwrap_or("").parse().map_err(|e| {
+                        Error::Mesh(format!("line {}: bad face index {entry:?}: {e}", lineno + 1))
+                    })?;
+                    let resolved = if index > 0 {
+                        index - 1
+                    } else {
+                        positions.len() as i64 + index
+                    };
+                    if index == 0 || resolved < 0 {
+                        return Err(Error::Mesh(format!(
+                            "line {}: face index {index} is out of range",
+                            lineno + 1
+                        )));
+                    }
+                    face.push(resolved as usize);
+                }
+                if face.len() < 3 {
+                    return Err(Error::Mesh(format!("line {}: face has fewer than 3 vertices", lineno + 1)));
+                }
+                for k in 1..face.len() - 1 {
+                    triangles.push([face[0], face[k], face[k + 1]]);
+                }
+            }
+            _ => {}
+        }
+    }
+    TriMesh::new(positions, triangles)
+}
+
+/// Writes the mesh with the given vertex positions (e.g. a simulated state) as OBJ.
+pub fn write_obj(path: &std::path::Path, mesh: &TriMesh, positions: &[Vec3]) -> Result<()> {
+    let mut out = String::with_capacity(40 * (positions.len() + mesh.triangles.len()));
+    for p in positions {
+        let _ = writeln!(out, "v {:.17e} {:.17e} {:.17e}", p.x, p.y, p.z);
+    }
+    for t in &mesh.triangles {
+        let _ = writeln!(out, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    std::fs::write(path, out)
+        .map_err(|e| Error::Io { path: path.display().to_string(), message: e.to_string() })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_polygons_and_slashes() {
+        let text = "# quad\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1 4//1\n";
+        let m = parse_obj(text).unwrap();
+        assert_eq!(m.num_vertices(), 4);
+        assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3]]);
+        let rel = parse_obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\n").unwrap();
+        assert_eq!(rel.triangles, vec![[0, 1, 2]]);
+    }
+
+    #[test]
+    fn rejects_degenerate_and_out_of_range() {
+        let err = parse_obj("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n").unwrap_err();
+        assert!(err.to_string().contains("degenerate"), "{err}");
+        let err = parse_obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n").unwrap_err();
+        assert!(err.to_string().contains("references vertex 3"), "{err}");
+    }
+
+    #[test]
+    fn write_then_read_round_trips() {
+        let m = super::super::grid(3, 4, 1.0, 2.0, super::super::GridPlane::Xy).unwrap();
+        let path = std::env::temp_dir().join(format!("diffcloth_rt_{}.obj", std::process::id()));
+        write_obj(&path, &m, &m.positions).unwrap();
+        let back = read_obj(&path).unwrap();
+        std::fs::remove_file(&path).ok();
+        assert_eq!(back.triangles, m.triangles);
+        for (a, b) in back.positions.iter().zip(&m.positions) {
+            assert_eq!(a, b);
+        }
+    }
+}

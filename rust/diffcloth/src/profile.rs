@@ -1,0 +1,54 @@
+//! Per-stage wall time and counters, readable after any run (like the paper's Table 1 columns).
+
+use std::time::{Duration, Instant};
+
+/// Accumulated wall time per forward stage and the counts that go with it.
+#[derive(Debug, Clone, Default)]
+pub struct Profile {
+    /// Forward steps taken.
+    pub steps: u64,
+    /// PD (local-global) iterations over all steps.
+    pub iterations: u64,
+    /// Steps that stopped at the iteration cap before reaching the tolerance.
+    pub unconverged_steps: u64,
+    /// Accelerated iterates rejected by the energy guard (the plain PD step was taken).
+    pub acceleration_rejections: u64,
+    /// Local step: projections onto each constraint set and the right-hand side gather.
+    pub local: Duration,
+    /// Global step: the prefactored sparse solve.
+    pub global: Duration,
+    /// Numeric refactorizations of the system matrix (only when h, mass or stiffness change).
+    pub refactorizations: u64,
+    pub refactor: Duration,
+    /// Everything else inside `step` (prediction, acceleration, residuals, bookkeeping).
+    pub other: Duration,
+    /// Total time inside `step`.
+    pub total: Duration,
+}
+
+impl Profile {
+    /// Named stage times in seconds and counters, for reporting.
+    pub fn entries(&self) -> Vec<(&'static str, f64)> {
+        vec![
+            ("steps", self.steps as f64),
+            ("iterations", self.iterations as f64),
+            ("unconverged_steps", self.unconverged_steps as f64),
+            ("acceleration_rejections", self.acceleration_rejections as f64),
+            ("refactorizations", self.refactorizations as f64),
+            ("local_s", self.local.as_secs_f64()),
+            ("global_s", self.global.as_secs_f64()),
+            ("refactor_s", self.refactor.as_secs_f64()),
+            ("other_s", self.other.as_secs_f64()),
+            ("total_s", self.total.as_secs_f64()),
+        ]
+    }
+}
+
+/// Times a closure into a stage accumulator.
+#[inline]
+pub fn timed<T>(acc: &mut Duration, f: impl FnOnce() -> T) -> T {
+    let start = Instant::now();
+    let out = f();
+    *acc += start.elapsed();
+    out
+}

@@ -1,0 +1,5 @@
+//! Integration tests of the simulator: each checks a physical fact, not only that it runs.
+mod common;
+mod forward_physics;
+mod pd_solver;
+mod scenes;

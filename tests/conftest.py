@@ -1,0 +1,22 @@
+import pytest
+
+from diffcloth_gym import Simulator
+
+
+@pytest.fixture
+def wind():
+    return Simulator.from_config("wind")
+
+
+SMALL_GRID = {
+    "h": 0.01,
+    "effects": ["gravity", "stretch", "attachments", "external_forces"],
+    "mesh": {"kind": "grid", "rows": 5, "cols": 5, "width": 1.0, "height": 1.0, "plane": "xy"},
+    "material": {"density": 0.1, "k_stretch": 100.0},
+    "attachments": {"select": "top_corners"},
+}
+
+
+@pytest.fixture
+def small():
+    return Simulator.from_config(SMALL_GRID)

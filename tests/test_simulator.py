@@ -1,0 +1,157 @@
+"""The Python API: construction, stepping, physical sanity, errors, GIL release, profile."""
+
+import copy
+import threading
+
+import numpy as np
+import pytest
+
+import diffcloth_gym
+from diffcloth_gym import Simulator
+from tests.conftest import SMALL_GRID
+
+
+def test_every_shipped_scene_builds_and_steps():
+    for path in sorted(diffcloth_gym.CONFIG_DIR.glob("*.toml")):
+        sim = Simulator.from_config(path)
+        stats = sim.step(steps=2)
+        assert stats["iterations"] >= 1
+        assert np.isfinite(sim.positions).all()
+
+
+def test_arrays_are_float64_n_by_3(wind):
+    for a in (wind.positions, wind.velocities, wind.rest_positions):
+        assert a.dtype == np.float64 and a.shape == (wind.num_nodes, 3)
+    assert wind.triangles.shape[1] == 3 and wind.triangles.max() < wind.num_nodes
+    assert wind.masses.shape == (wind.num_nodes,)
+    assert wind.effects == ["gravity", "stretch", "attachments", "wind"]
+
+
+def test_free_fall_closed_form_from_python():
+    cfg = {"h": 0.02, "effects": ["gravity"], "material": {"density": 1.0},
+           "mesh": {"kind": "grid", "rows": 3, "cols": 3, "width": 1, "height": 1, "plane": "xz"}}
+    sim = Simulator.from_config(cfg)
+    x0 = sim.positions
+    v0 = np.tile([1.0, 2.0, -0.5], (sim.num_nodes, 1))
+    sim.reset(v=v0)
+    sim.step(steps=10)
+    n, h, g = 10, 0.02, np.array([0, -9.8, 0])
+    expected = x0 + n * h * v0 + h * h * g * n * (n + 1) / 2
+    np.testing.assert_allclose(sim.positions, expected, atol=1e-10)
+    assert sim.time == pytest.approx(0.2)
+
+
+def test_end_effectors_move_the_cloth(small):
+    targets = small.attachment_targets + np.array([0.0, 0.0, 0.3])
+    for _ in range(100):
+        small.step(attachment_targets=targets)
+    nodes = small.attachment_nodes
+    np.testing.assert_allclose(small.positions[nodes], targets, atol=5e-3)
+
+
+def test_set_params_and_solver(wind):
+    wind.set_params(k_stretch=250.0, gravity=[0, -5, 0])
+    assert wind.params()["k_stretch"] == 250.0
+    assert wind.profile()["refactorizations"] == 1
+    wind.set_solver(tolerance=1e-6, acceleration="none", max_iterations=50)
+    assert wind.solver()["acceleration"] == "none"
+    stats = wind.step()
+    assert stats["iterations"] <= 50
+
+
+@pytest.mark.parametrize(
+    "mutate, needle",
+    [
+        (lambda c: c["material"].update(k_strech=1.0), "k_strech"),
+        (lambda c: c.update(colour="red"), "colour"),
+        (lambda c: c["material"].update(k_stretch=-5.0), "k_stretch"),
+        (lambda c: c["mesh"].update(rows=1), "2x2"),
+        (lambda c: c["effects"].append("magic"), "magic"),
+        (lambda c: c.pop("attachments"), "[attachments]"),
+        (lambda c: c.update(mesh={"kind": "obj", "path": "/nonexistent.obj"}), "nonexistent.obj"),
+    ],
+)
+def test_bad_configs_raise_value_errors_naming_the_problem(mutate, needle):
+    cfg = copy.deepcopy(SMALL_GRID)
+    mutate(cfg)
+    with pytest.raises(ValueError, match=None) as err:
+        Simulator.from_config(cfg)
+    assert needle in str(err.value)
+    assert isinstance(err.value, diffcloth_gym.DiffClothError)
+
+
+def test_unknown_scene_name_lists_the_shipped_ones():
+    with pytest.raises(diffcloth_gym.ConfigError, match="wind"):
+        Simulator.from_config("no_such_scene")
+
+
+def test_bad_step_input_raises_and_simulator_stays_usable(small):
+    before = small.positions
+    n, k = small.num_nodes, len(small.attachment_nodes)
+    bad_inputs = [
+        dict(attachment_targets=np.zeros((k + 1, 3))),
+        dict(attachment_targets=np.zeros((k, 2))),
+        dict(attachment_targets=np.full((k, 3), np.nan)),
+        dict(external_forces=np.zeros(n)),
+        dict(external_forces=np.full((n, 3), np.inf)),
+        dict(external_forces=[["a", "b", "c"]] * n),
+        dict(steps=0),
+    ]
+    for kwargs in bad_inputs:
+        with pytest.raises(ValueError):
+            small.step(**kwargs)
+    np.testing.assert_array_equal(small.positions, before)
+    with pytest.raises(ValueError, match="k_stretch"):
+        small.set_params(k_stretch=-1.0)
+    with pytest.raises(ValueError, match="unknown parameter"):
+        small.set_params(stiffness=3.0)
+    with pytest.raises(ValueError, match="tolerance"):
+        small.set_solver(tolerance=float("nan"))
+    with pytest.raises(ValueError, match="x"):
+        small.reset(x=np.zeros((3, 3)))
+    small.step(external_forces=np.zeros((n, 3)))
+    assert np.isfinite(small.positions).all()
+
+
+def test_external_forces_need_the_effect(wind):
+    with pytest.raises(diffcloth_gym.InputError, match="external_forces"):
+        wind.step(external_forces=np.zeros((wind.num_nodes, 3)))
+
+
+def test_profile_accounts_for_the_step_time(wind):
+    wind.reset_profile()
+    wind.step(steps=20)
+    p = wind.profile()
+    assert p["steps"] == 20 and p["iterations"] >= 20
+    parts = p["local_s"] + p["global_s"] + p["other_s"]
+    assert parts == pytest.approx(p["total_s"], rel=1e-6)
+    assert p["local_s"] > 0 and p["global_s"] > 0
+
+
+def test_long_steps_release_the_gil():
+    """While one thread is inside a long Rust call, another Python thread keeps running."""
+    sim = Simulator.from_config("wind")
+    sim.set_solver(tolerance=0.0, max_iterations=200)
+    done = threading.Event()
+    ticks = 0
+
+    def work():
+        sim.step(steps=60)
+        done.set()
+
+    t = threading.Thread(target=work)
+    t.start()
+    while not done.is_set():
+        ticks += 1
+    t.join()
+    # With the GIL held for the whole call, the main thread could only tick before/after it.
+    assert ticks > 10_000
+
+
+def test_write_obj_round_trip(tmp_path, wind):
+    wind.step(steps=5)
+    path = tmp_path / "state.obj"
+    wind.write_obj(path)
+    sim = Simulator.from_config({"h": 0.01, "effects": [], "material": {"density": 1.0},
+                                 "mesh": {"kind": "obj", "path": str(path)}})
+    np.testing.assert_allclose(sim.rest_positions, wind.positions, rtol=0, atol=1e-12)
