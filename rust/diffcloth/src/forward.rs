@@ -251,6 +251,10 @@ impl Simulator {
     pub fn step_count(&self) -> u64 {
         self.step_count
     }
+    /// `(stored values of the Cholesky factor, supernodal?)` of the system matrix.
+    pub fn factor_stats(&self) -> (usize, bool) {
+        self.factor.factor_stats()
+    }
     pub fn profile(&self) -> &Profile {
         &self.profile
     }

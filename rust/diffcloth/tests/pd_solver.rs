@@ -98,7 +98,8 @@ fn residual_decreases_and_energy_never_increases() {
         sim.set_trace(true);
         sim.step(StepInput::default()).unwrap();
         let trace = sim.trace().unwrap().to_vec();
-        assert_eq!(trace.len(), 200);
+        // The loop ends early only if the update is exactly zero (a bitwise fixed point).
+        assert!(trace.len() == 200 || trace.last().unwrap().1 == 0.0, "{accel}: {} iterations", trace.len());
         for w in trace.windows(2) {
             assert!(w[1].0 <= w[0].0 + 1e-12 * w[0].0.abs(), "{accel}: energy rose {} -> {}", w[0].0, w[1].0);
         }
@@ -106,7 +107,7 @@ fn residual_decreases_and_energy_never_increases() {
         assert!(last < 1e-8 * first, "{accel}: residual {first} -> {last}");
         if accel == "none" {
             // Plain PD: the residual also decreases over every 10-iteration window.
-            for k in (10..200).step_by(10) {
+            for k in (10..trace.len()).step_by(10) {
                 assert!(trace[k].1 < trace[k - 10].1 || trace[k].1 < 1e-13, "{accel}: iteration {k}");
             }
         }

@@ -108,15 +108,24 @@ impl PdConstraints for Stretch {
         // Move the output buffers out so `work` can borrow the geometry (no allocation).
         let (mut projection, mut energy) = (std::mem::take(&mut self.projection), std::mem::take(&mut self.energy));
         let this = &*self;
-        let work = |(t, (p, e)): (usize, (&mut Mat32, &mut f64))| {
-            let f = this.deformation_gradient(t, x);
-            *p = project_singular_values(&f, lo, hi);
-            *e = 0.5 * this.weight[t] * (f - *p).norm_squared();
+        // Triangles go in groups of LANES: their independent sqrt/div chains overlap and
+        // vectorize, instead of one latency-bound chain after another.
+        let work = |(group, (p, e)): (usize, (&mut [Mat32], &mut [f64]))| {
+            let base = group * LANES;
+            let mut f = [Mat32::zeros(); LANES];
+            for (l, fl) in f.iter_mut().enumerate().take(p.len()) {
+                *fl = this.deformation_gradient(base + l, x);
+            }
+            let projected = project_singular_values_lanes(&f, lo, hi);
+            for l in 0..p.len() {
+                p[l] = projected[l];
+                e[l] = 0.5 * this.weight[base + l] * (f[l] - projected[l]).norm_squared();
+            }
         };
         if parallel && projection.len() >= PARALLEL_MIN_CONSTRAINTS {
-            projection.par_iter_mut().zip(energy.par_iter_mut()).enumerate().for_each(work);
+            projection.par_chunks_mut(LANES).zip(energy.par_chunks_mut(LANES)).enumerate().for_each(work);
         } else {
-            projection.iter_mut().zip(energy.iter_mut()).enumerate().for_each(work);
+            projection.chunks_mut(LANES).zip(energy.chunks_mut(LANES)).enumerate().for_each(work);
         }
         (self.projection, self.energy) = (projection, energy);
         // Serial sum: bitwise identical whatever the thread count.
@@ -134,17 +143,60 @@ impl PdConstraints for Stretch {
 }
 
 /// Singular values `s1 >= s2 >= 0` and right singular vectors of a 3x2 matrix, in closed form
-/// from the 2x2 eigenproblem of `F^T F` (a few flops; no iterative SVD in the hot loop).
+/// from the 2x2 eigenproblem of `F^T F = [[a, b], [b, c]]` (no trigonometry: this runs once per
+/// triangle per PD iteration).
 fn singular_2d(f: &Mat32) -> (f64, f64, Vector2<f64>, Vector2<f64>) {
     let (c0, c1) = (f.column(0), f.column(1));
     let (a, b, c) = (c0.dot(&c0), c0.dot(&c1), c1.dot(&c1));
     let half_trace = 0.5 * (a + c);
     let disc = (0.25 * (a - c) * (a - c) + b * b).sqrt();
-    let s1 = (half_trace + disc).sqrt();
-    let s2 = (half_trace - disc).max(0.0).sqrt();
-    // Eigenvector of the larger eigenvalue of [[a, b], [b, c]] at angle atan2(2b, a - c) / 2.
-    let (sin, cos) = (0.5 * (2.0 * b).atan2(a - c)).sin_cos();
-    (s1, s2, Vector2::new(cos, sin), Vector2::new(-sin, cos))
+    let (l1, l2) = (half_trace + disc, (half_trace - disc).max(0.0));
+    // Eigenvector of l1: (l1 - c, b) or (b, l1 - a); take the better conditioned one.
+    let (p, q) = (Vector2::new(l1 - c, b), Vector2::new(b, l1 - a));
+    let v = if p.norm_squared() >= q.norm_squared() { p } else { q };
+    let norm = v.norm();
+    // An isotropic F^T F (norm = 0) has every direction as eigenvector.
+    let v1 = if norm > 1e-300 { v / norm } else { Vector2::new(1.0, 0.0) };
+    (l1.sqrt(), l2.sqrt(), v1, Vector2::new(-v1.y, v1.x))
+}
+
+/// Triangles projected together by [`project_singular_values_lanes`].
+const LANES: usize = 4;
+
+/// [`project_singular_values`] for `LANES` matrices at once, written lane by lane without
+/// branches so the compiler vectorizes it; rank-deficient lanes fall back to the scalar path.
+fn project_singular_values_lanes(f: &[Mat32; LANES], lo: f64, hi: f64) -> [Mat32; LANES] {
+    let mut out = [Mat32::zeros(); LANES];
+    let mut regular = [false; LANES];
+    let (mut r1, mut r2, mut v1x, mut v1y) = ([0.0; LANES], [0.0; LANES], [0.0; LANES], [0.0; LANES]);
+    for l in 0..LANES {
+        let (c0, c1) = (f[l].column(0), f[l].column(1));
+        let (a, b, c) = (c0.dot(&c0), c0.dot(&c1), c1.dot(&c1));
+        let half_trace = 0.5 * (a + c);
+        let disc = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+        let (l1, l2) = (half_trace + disc, (half_trace - disc).max(0.0));
+        let (px, py, qx, qy) = (l1 - c, b, b, l1 - a);
+        let take_p = px * px + py * py >= qx * qx + qy * qy;
+        let (vx, vy) = if take_p { (px, py) } else { (qx, qy) };
+        let norm2 = vx * vx + vy * vy;
+        let inv = if norm2 > 1e-300 { 1.0 / norm2.sqrt() } else { 0.0 };
+        let isotropic = norm2 <= 1e-300;
+        v1x[l] = if isotropic { 1.0 } else { vx * inv };
+        v1y[l] = if isotropic { 0.0 } else { vy * inv };
+        let (s1, s2) = (l1.sqrt(), l2.sqrt());
+        regular[l] = s2 > 1e-8 * s1;
+        r1[l] = s1.clamp(lo, hi) / s1;
+        r2[l] = s2.clamp(lo, hi) / s2;
+    }
+    for l in 0..LANES {
+        if regular[l] {
+            let v1 = Vector2::new(v1x[l], v1y[l]);
+            out[l] = f[l] * r2[l] + (f[l] * v1) * ((r1[l] - r2[l]) * v1.transpose());
+        } else {
+            out[l] = project_singular_values(&f[l], lo, hi);
+        }
+    }
+    out
 }
 
 /// Closest matrix to `f` (Frobenius) whose singular values lie in `[lo, hi]`:
@@ -153,9 +205,10 @@ pub fn project_singular_values(f: &Mat32, lo: f64, hi: f64) -> Mat32 {
     let (s1, s2, v1, v2) = singular_2d(f);
     let (t1, t2) = (s1.clamp(lo, hi), s2.clamp(lo, hi));
     if s2 > 1e-8 * s1 {
-        // F V diag(t / s) V^T = U diag(t) V^T without forming U.
-        let scale = (t1 / s1) * v1 * v1.transpose() + (t2 / s2) * v2 * v2.transpose();
-        return f * scale;
+        // F V diag(t / s) V^T = U diag(t) V^T without forming U; with V = [v1 v2] orthonormal,
+        // V diag(r1, r2) V^T = r2 I + (r1 - r2) v1 v1^T.
+        let (r1, r2) = (t1 / s1, t2 / s2);
+        return f * r2 + (f * v1) * ((r1 - r2) * v1.transpose());
     }
     // Rank-deficient F (collapsed triangle): U's columns are not unique; complete them.
     let u1 = if s1 > 0.0 { f * v1 / s1 } else { Vec3::x() };
@@ -202,6 +255,24 @@ mod tests {
                     * Matrix2::from_diagonal(&qs.singular_values.map(|s| s.clamp(0.9, 1.1)))
                     * qs.v_t.unwrap();
                 assert!((f - p).norm() <= (f - member).norm() + 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn lane_projection_matches_the_scalar_one() {
+        for seed in 0..50 {
+            let mut f = [0; LANES].map(|_| Mat32::zeros());
+            for (l, fl) in f.iter_mut().enumerate() {
+                *fl = random_f(7 * seed + l as u64);
+            }
+            // A collapsed lane and a zero lane take the fallback path.
+            f[1] = Mat32::from_columns(&[Vec3::new(1.0, 2.0, 0.0), Vec3::new(2.0, 4.0, 0.0)]);
+            f[2] = Mat32::zeros();
+            let lanes = project_singular_values_lanes(&f, 0.9, 1.1);
+            for l in 0..LANES {
+                let scalar = project_singular_values(&f[l], 0.9, 1.1);
+                assert!((lanes[l] - scalar).norm() < 1e-12 * (1.0 + scalar.norm()), "seed {seed} lane {l}");
             }
         }
     }

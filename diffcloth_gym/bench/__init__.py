@@ -1,0 +1,1 @@
+"""Benchmarks: results go to benchmarks/results/<name>.{json,md} (DESIGN.md section 6)."""

@@ -1,0 +1,74 @@
+"""Writing benchmark results: JSON with a meta block plus a Markdown table of the same rows."""
+
+from __future__ import annotations
+
+import datetime
+import json
+import os
+import platform
+import subprocess
+import sys
+from pathlib import Path
+
+RESULTS_DIR = Path(__file__).resolve().parents[2] / "benchmarks" / "results"
+
+
+def _cpu() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _git() -> str:
+    try:
+        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True).stdout.strip()
+        return rev + ("-dirty" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def meta(extra: dict | None = None) -> dict:
+    m = {
+        "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "threads": os.cpu_count(),
+        "cpu": _cpu(),
+        "git": _git(),
+    }
+    m.update(extra or {})
+    return m
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        if v == 0:
+            return "0"
+        if abs(v) >= 1000 or abs(v) < 1e-2:
+            return f"{v:.2e}"
+        return f"{v:.3g}"
+    return str(v)
+
+
+def markdown_table(rows: list[dict], columns: list[str] | None = None) -> str:
+    columns = columns or list(dict.fromkeys(k for r in rows for k in r))
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    for r in rows:
+        lines.append("| " + " | ".join(_fmt(r.get(c, "")) for c in columns) + " |")
+    return "\n".join(lines)
+
+
+def write(name: str, rows: list[dict], meta_block: dict, title: str, notes: str = "", columns: list[str] | None = None, out_dir: Path | None = None) -> Path:
+    out = Path(out_dir or RESULTS_DIR)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{name}.json").write_text(json.dumps({"meta": meta_block, "rows": rows}, indent=1) + "\n")
+    md = [f"# {title}", "", f"`{meta_block['command']}` — {meta_block['date']}, {meta_block['cpu']}, git {meta_block['git']}", ""]
+    if notes:
+        md += [notes.strip(), ""]
+    md.append(markdown_table(rows, columns))
+    (out / f"{name}.md").write_text("\n".join(md) + "\n")
+    return out / f"{name}.json"
