@@ -86,7 +86,7 @@ class Simulator:
         ``attachment_targets``: (k, 3) targets of the k attached nodes (the end effectors);
         ``None`` keeps the previous targets. ``external_forces``: (n, 3) forces in N per node
         (needs the ``external_forces`` effect). Returns the last step's solver stats
-        ``{"iterations", "residual", "converged"}``.
+        ``{"iterations", "residual", "converged", "contacts": {"take_off", "stick", "slip"}}``.
         """
         if not isinstance(steps, int) or steps < 1:
             raise InputError(f"steps must be a positive integer, got {steps!r}")
@@ -170,9 +170,10 @@ class Simulator:
 
     # -- diagnostics ---------------------------------------------------------------------
     def profile(self) -> dict:
-        """Wall time per stage in seconds (``local_s``, ``global_s``, ``other_s``,
-        ``refactor_s``, ``total_s``) and counters (``steps``, ``iterations``, ...) since the
-        last :meth:`reset_profile`."""
+        """Wall time per stage in seconds (``local_s``, ``global_s``, ``detection_s``,
+        ``contact_s``, ``other_s``, ``refactor_s``, ``total_s``) and counters (``steps``,
+        ``iterations``, ``contacts_take_off``/``_stick``/``_slip`` summed over steps, ...) since
+        the last :meth:`reset_profile`."""
         return self._core.profile()
 
     def reset_profile(self) -> None:
@@ -181,6 +182,17 @@ class Simulator:
     def last_step(self) -> dict:
         """Solver stats of the last step."""
         return self._core.last_step()
+
+    def contacts(self) -> dict:
+        """The last step's contacts as arrays (one entry per contact): ``node_a``, ``node_b``
+        (-1 for obstacle contacts), ``obstacle`` (-1 for self-contacts), ``normal`` (k, 3),
+        ``gap``, ``mu``, ``branch`` (0 take off, 1 stick, 2 slip), ``impulse`` (k, 3) in N s
+        acting on ``node_a`` (its opposite acts on ``node_b``)."""
+        return self._core.contacts()
+
+    def obstacle_distance(self, index: int = 0) -> np.ndarray:
+        """Signed distance of every node to obstacle ``index`` (positive outside), (n,)."""
+        return np.asarray(self._core.obstacle_distance(index))
 
     def mechanical_energy(self) -> float:
         """Kinetic + gravitational + elastic energy of the current state (J)."""

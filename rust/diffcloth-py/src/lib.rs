@@ -1,7 +1,7 @@
 //! Thin Python binding (`diffcloth_gym._core`): converts arrays, maps errors to the exception
 //! tree in `diffcloth_gym.errors`, releases the GIL for long calls. No physics here.
 
-use diffcloth::{Error, Params, SceneConfig, Simulator, SolverSettings, StepInput, StepStats, Vec3};
+use diffcloth::{Branch, ContactKind, Error, Params, SceneConfig, Simulator, SolverSettings, StepInput, StepStats, Vec3};
 use numpy::{PyArray2, PyReadonlyArray2, ToPyArray};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -67,6 +67,11 @@ fn stats_dict<'py>(py: Python<'py>, s: StepStats) -> PyResult<Bound<'py, PyDict>
     d.set_item("iterations", s.iterations)?;
     d.set_item("residual", s.residual)?;
     d.set_item("converged", s.converged)?;
+    let c = PyDict::new(py);
+    c.set_item("take_off", s.contacts.take_off)?;
+    c.set_item("stick", s.contacts.stick)?;
+    c.set_item("slip", s.contacts.slip)?;
+    d.set_item("contacts", c)?;
     Ok(d)
 }
 
@@ -287,6 +292,57 @@ impl PySimulator {
 
     fn last_step<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         stats_dict(py, self.inner.last_step())
+    }
+
+    /// The last step's contacts as arrays: node_a, node_b (-1 for obstacle contacts),
+    /// obstacle (-1 for self-contacts), normal (k, 3), gap, mu, branch (0 take off, 1 stick,
+    /// 2 slip), impulse (k, 3) on node_a in N s.
+    fn contacts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let cs = self.inner.contacts();
+        let (mut a, mut b, mut o, mut gap, mut mu, mut branch) = (vec![], vec![], vec![], vec![], vec![], vec![]);
+        let (mut normal, mut impulse) = (vec![], vec![]);
+        for c in cs {
+            match c.kind {
+                ContactKind::Obstacle { node, obstacle } => {
+                    a.push(node as i64);
+                    b.push(-1i64);
+                    o.push(obstacle as i64);
+                }
+                ContactKind::SelfPair { a: na, b: nb } => {
+                    a.push(na as i64);
+                    b.push(nb as i64);
+                    o.push(-1i64);
+                }
+            }
+            gap.push(c.gap);
+            mu.push(c.mu);
+            branch.push(match c.branch {
+                Branch::TakeOff => 0i64,
+                Branch::Stick => 1,
+                Branch::Slip => 2,
+            });
+            normal.push(c.normal);
+            impulse.push(c.impulse);
+        }
+        let d = PyDict::new(py);
+        d.set_item("node_a", a.to_pyarray(py))?;
+        d.set_item("node_b", b.to_pyarray(py))?;
+        d.set_item("obstacle", o.to_pyarray(py))?;
+        d.set_item("normal", nodes_to_py(py, &normal))?;
+        d.set_item("gap", gap.to_pyarray(py))?;
+        d.set_item("mu", mu.to_pyarray(py))?;
+        d.set_item("branch", branch.to_pyarray(py))?;
+        d.set_item("impulse", nodes_to_py(py, &impulse))?;
+        Ok(d)
+    }
+
+    /// Signed distance of every node to obstacle `index` at the current time, shape (n,).
+    fn obstacle_distance(&self, py: Python<'_>, index: usize) -> PyResult<Vec<f64>> {
+        let obstacles = self.inner.obstacles();
+        let Some(o) = obstacles.get(index) else {
+            return Err(raise(py, "InputError", format!("obstacle {index} does not exist ({} obstacles)", obstacles.len())));
+        };
+        Ok(self.inner.positions().iter().map(|p| o.query(p, self.inner.time()).0).collect())
     }
 
     /// Kinetic + gravitational + elastic energy of the current state.

@@ -30,6 +30,12 @@ pub struct SceneConfig {
     pub gravity: [f64; 3],
     pub attachments: Option<AttachmentConfig>,
     pub wind: Option<WindConfig>,
+    /// Contact tolerances (defaults apply when a contact effect is on and this is absent).
+    pub contact: Option<ContactConfig>,
+    /// Analytic obstacles (needs the `obstacle_contact` effect).
+    #[serde(default)]
+    pub obstacles: Vec<ObstacleConfig>,
+    pub self_collision: Option<SelfCollisionConfig>,
     #[serde(default)]
     pub solver: SolverConfig,
 }
@@ -45,6 +51,12 @@ pub enum Effect {
     Wind,
     /// Per-node forces passed to each step.
     ExternalForces,
+    /// Non-penetration against the scene's obstacles.
+    ObstacleContact,
+    /// Coulomb friction in every contact (else contacts are frictionless).
+    Friction,
+    /// Node-node contact between non-adjacent cloth nodes.
+    SelfCollision,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -132,6 +144,63 @@ pub struct WindConfig {
     pub per_area: bool,
 }
 
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContactConfig {
+    /// Distance kept between nodes and obstacle surfaces in m (default 0.01).
+    #[serde(default = "default_thickness")]
+    pub thickness: f64,
+    /// Extra detection distance in m (default 0.01).
+    #[serde(default = "default_margin")]
+    pub margin: f64,
+}
+
+impl Default for ContactConfig {
+    fn default() -> Self {
+        Self { thickness: default_thickness(), margin: default_margin() }
+    }
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObstacleConfig {
+    pub shape: ShapeConfig,
+    /// Coulomb friction coefficient (default 0).
+    #[serde(default)]
+    pub mu: f64,
+    /// Constant velocity in m/s (default: static).
+    pub velocity: Option<[f64; 3]>,
+    /// Piecewise-linear path: rows `[t, dx, dy, dz]` of offsets from the placement.
+    pub path: Option<Vec<[f64; 4]>>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+pub enum ShapeConfig {
+    Plane { point: [f64; 3], normal: [f64; 3] },
+    Sphere { center: [f64; 3], radius: f64 },
+    Capsule { a: [f64; 3], b: [f64; 3], radius: f64 },
+    Box {
+        center: [f64; 3],
+        half_extents: [f64; 3],
+        #[serde(default)]
+        rotate_deg: [f64; 3],
+    },
+    /// Spherical cavity of `radius` around `center`, open above `y = rim_height`.
+    Bowl { center: [f64; 3], radius: f64, rim_height: f64 },
+    Union { parts: Vec<ShapeConfig> },
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SelfCollisionConfig {
+    /// Contact distance between two nodes in m.
+    pub radius: f64,
+    /// Friction coefficient between cloth layers (default 0.1, as the reference).
+    #[serde(default = "default_self_mu")]
+    pub mu: f64,
+}
+
 /// PD solver settings: the accuracy knobs.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -166,6 +235,15 @@ impl Default for SolverConfig {
     }
 }
 
+fn default_thickness() -> f64 {
+    0.01
+}
+fn default_margin() -> f64 {
+    0.01
+}
+fn default_self_mu() -> f64 {
+    0.1
+}
 fn default_steps() -> usize {
     100
 }

@@ -12,6 +12,9 @@ pub struct Effects {
     pub attachments: bool,
     pub wind: bool,
     pub external_forces: bool,
+    pub obstacle_contact: bool,
+    pub friction: bool,
+    pub self_collision: bool,
 }
 
 impl Effects {
@@ -26,22 +29,42 @@ impl Effects {
             attachments: cfg.has(Effect::Attachments),
             wind: cfg.has(Effect::Wind),
             external_forces: cfg.has(Effect::ExternalForces),
+            obstacle_contact: cfg.has(Effect::ObstacleContact),
+            friction: cfg.has(Effect::Friction),
+            self_collision: cfg.has(Effect::SelfCollision),
         };
         let pairs = [
-            ("wind", e.wind, cfg.wind.is_some()),
-            ("attachments", e.attachments, cfg.attachments.is_some()),
+            ("wind", "[wind]", e.wind, cfg.wind.is_some()),
+            ("attachments", "[attachments]", e.attachments, cfg.attachments.is_some()),
+            ("obstacle_contact", "[[obstacles]]", e.obstacle_contact, !cfg.obstacles.is_empty()),
+            ("self_collision", "[self_collision]", e.self_collision, cfg.self_collision.is_some()),
         ];
-        for (name, declared, configured) in pairs {
+        for (name, table, declared, configured) in pairs {
             if declared && !configured {
-                return Err(Error::Config(format!("effect '{name}' is declared but the [{name}] table is missing")));
+                return Err(Error::Config(format!("effect '{name}' is declared but the {table} table is missing")));
             }
             if configured && !declared {
                 return Err(Error::Config(format!(
-                    "a [{name}] table is given but '{name}' is not in `effects`; add it or remove the table"
+                    "a {table} table is given but '{name}' is not in `effects`; add it or remove the table"
                 )));
             }
         }
+        if e.friction && !e.has_contact() {
+            return Err(Error::Config(
+                "effect 'friction' needs 'obstacle_contact' or 'self_collision'".into(),
+            ));
+        }
+        if cfg.contact.is_some() && !e.has_contact() {
+            return Err(Error::Config(
+                "a [contact] table is given but neither 'obstacle_contact' nor 'self_collision' is in `effects`".into(),
+            ));
+        }
         Ok(e)
+    }
+
+    /// Any contact effect on (then collision detection and the contact solve run).
+    pub fn has_contact(&self) -> bool {
+        self.obstacle_contact || self.self_collision
     }
 
     /// Names of the effects that are on, in a fixed order.
@@ -53,6 +76,9 @@ impl Effects {
             ("attachments", self.attachments),
             ("wind", self.wind),
             ("external_forces", self.external_forces),
+            ("obstacle_contact", self.obstacle_contact),
+            ("friction", self.friction),
+            ("self_collision", self.self_collision),
         ]
         .into_iter()
         .filter_map(|(n, on)| on.then_some(n))

@@ -3,7 +3,9 @@
 //! `P_s = M / h^2 + sum_i w_i A_i^T A_i`, accelerated by energy-guarded Anderson.
 
 use crate::anderson::Anderson;
-use crate::config::SceneConfig;
+use crate::collision::{Motion, Obstacle, SelfCollision, Shape};
+use crate::config::{SceneConfig, ShapeConfig};
+use crate::contact::{BranchCounts, Contact, ContactSet, ContactSettings};
 use crate::effects::Effects;
 use crate::energy::{Attachments, Bend, PdConstraints, Stretch};
 use crate::error::{Error, Result};
@@ -59,6 +61,8 @@ pub struct StepStats {
     /// Final RMS PD update (metres).
     pub residual: f64,
     pub converged: bool,
+    /// The step's contacts by branch at the last iteration.
+    pub contacts: BranchCounts,
 }
 
 /// Inputs of one step; `None` keeps the previous attachment targets / applies no force.
@@ -81,6 +85,10 @@ pub struct Simulator {
     bend: Option<Bend>,
     attachments: Option<Attachments>,
     wind: Option<Wind>,
+    obstacles: Vec<Obstacle>,
+    self_collision: Option<SelfCollision>,
+    contact_settings: ContactSettings,
+    contacts: ContactSet,
     factor: SpdFactor,
     // State.
     x: Vec<Vec3>,
@@ -92,6 +100,8 @@ pub struct Simulator {
     inertia_rhs: Vec<Vec3>,
     iterate: Vec<Vec3>,
     mapped: Vec<Vec3>,
+    /// `G(x_k)` kept while a safeguarded extrapolation is tried.
+    previous_mapped: Vec<Vec3>,
     update: Vec<Vec3>,
     extrapolated: Vec<Vec3>,
     anderson: Anderson,
@@ -157,6 +167,30 @@ impl Simulator {
             (Some(w), true) => Some(Wind::new(w, &mesh.positions, &node_area)?),
             _ => None,
         };
+        let obstacles = if effects.obstacle_contact {
+            config.obstacles.iter().enumerate().map(|(i, o)| build_obstacle(i, o)).collect::<Result<Vec<_>>>()?
+        } else {
+            Vec::new()
+        };
+        let self_collision = match (&config.self_collision, effects.self_collision) {
+            (Some(sc), true) => {
+                if !(sc.radius > 0.0 && sc.radius.is_finite()) {
+                    return Err(Error::Config(format!("self_collision.radius must be positive, got {}", sc.radius)));
+                }
+                check_mu("self_collision.mu", sc.mu)?;
+                Some(SelfCollision::new(&mesh, sc.radius, sc.mu))
+            }
+            _ => None,
+        };
+        let contact_cfg = config.contact.clone().unwrap_or_default();
+        if !(contact_cfg.thickness >= 0.0 && contact_cfg.margin >= 0.0 && contact_cfg.thickness.is_finite() && contact_cfg.margin.is_finite()) {
+            return Err(Error::Config("contact.thickness and contact.margin must be non-negative".into()));
+        }
+        let contact_settings = ContactSettings {
+            thickness: contact_cfg.thickness,
+            margin: contact_cfg.margin,
+            friction: effects.friction,
+        };
         let mass: Vec<f64> = node_area.iter().map(|a| params.density * a).collect();
         let mut sim = Self {
             config: config.clone(),
@@ -168,6 +202,10 @@ impl Simulator {
             bend,
             attachments,
             wind,
+            obstacles,
+            self_collision,
+            contact_settings,
+            contacts: ContactSet::default(),
             factor: SpdFactor::new(1, &[(0, 0, 1.0)])?,
             x: mesh.positions.clone(),
             v: vec![Vec3::zeros(); n],
@@ -177,6 +215,7 @@ impl Simulator {
             inertia_rhs: vec![Vec3::zeros(); n],
             iterate: vec![Vec3::zeros(); n],
             mapped: vec![Vec3::zeros(); n],
+            previous_mapped: vec![Vec3::zeros(); n],
             update: vec![Vec3::zeros(); n],
             extrapolated: vec![Vec3::zeros(); n],
             anderson: Anderson::new(config.solver.history, n),
@@ -266,6 +305,19 @@ impl Simulator {
     }
     pub fn stretch(&self) -> Option<&Stretch> {
         self.stretch.as_ref()
+    }
+    /// The current step's contacts (frames, branches and impulses of the last step).
+    pub fn contacts(&self) -> &[Contact] {
+        &self.contacts.contacts
+    }
+    pub fn obstacles(&self) -> &[Obstacle] {
+        &self.obstacles
+    }
+    pub fn contact_settings(&self) -> &ContactSettings {
+        &self.contact_settings
+    }
+    pub fn self_collision(&self) -> Option<&SelfCollision> {
+        self.self_collision.as_ref()
     }
     pub fn attachment_nodes(&self) -> &[usize] {
         self.attachments.as_ref().map_or(&[], |a| a.nodes())
@@ -370,8 +422,22 @@ impl Simulator {
     /// Advances one implicit-Euler step. On error the state is unchanged.
     pub fn step(&mut self, input: StepInput<'_>) -> Result<StepStats> {
         let start = Instant::now();
-        let (local0, global0) = (self.profile.local, self.profile.global);
+        let p0 = self.profile.clone();
         self.prepare(input)?;
+        if self.effects.has_contact() {
+            let detect_start = Instant::now();
+            self.contacts.detect(
+                &self.x,
+                &self.v,
+                &self.mass,
+                self.time,
+                self.params.h,
+                &self.obstacles,
+                self.self_collision.as_mut(),
+                &self.contact_settings,
+            );
+            self.profile.detection += detect_start.elapsed();
+        }
         let stats = self.solve_pd();
         // The PD result is in `mapped`.
         let h = self.params.h;
@@ -392,9 +458,13 @@ impl Simulator {
         p.steps += 1;
         p.iterations += stats.iterations as u64;
         p.unconverged_steps += u64::from(!stats.converged);
+        p.contacts_take_off += stats.contacts.take_off as u64;
+        p.contacts_stick += stats.contacts.stick as u64;
+        p.contacts_slip += stats.contacts.slip as u64;
         let total = start.elapsed();
         p.total += total;
-        p.other += total.saturating_sub((p.local - local0) + (p.global - global0));
+        let staged = (p.local - p0.local) + (p.global - p0.global) + (p.detection - p0.detection) + (p.contact_solve - p0.contact_solve);
+        p.other += total.saturating_sub(staged);
         Ok(stats)
     }
 
@@ -484,9 +554,14 @@ impl Simulator {
     }
 
     /// PD iterations from the initial guess `y`. Each iteration maps the iterate x to
-    /// `G(x) = P^{-1}(M y / h^2 + sum w A^T p(x))`, which never raises the energy E; an Anderson
-    /// extrapolation is kept only if it lowers E below the last accepted iterate's, otherwise
-    /// the plain step `G(x)` is taken and the history restarts (Peng et al. 2018).
+    /// `G(x) = P^{-1}(M y / h^2 + sum w A^T p(x) + r(x))` with contact forces `r`.
+    ///
+    /// Anderson acceleration is safeguarded two ways. Without contact, G never raises the
+    /// energy E, and an extrapolation is kept only if it lowers E below the last accepted
+    /// iterate's (Peng et al. 2018). Contact forces are not conservative, so with contacts an
+    /// extrapolation is kept only if its PD update `|G(x) - x|` is smaller than the last
+    /// iterate's; otherwise the plain step `G(x_k)` (already computed) is taken. Either way a
+    /// rejection restarts the history.
     fn solve_pd(&mut self) -> StepStats {
         self.iterate.copy_from_slice(&self.y);
         self.anderson.reset();
@@ -495,7 +570,9 @@ impl Simulator {
         }
         let tol = self.solver.tolerance;
         let max_it = self.solver.max_iterations;
+        let energy_guard = self.contacts.is_empty();
         let mut energy = self.local_step(Buffer::Iterate);
+        self.solve_contacts(Buffer::Iterate);
         let mut residual = self.global_step();
         let mut iterations = 1;
         self.record(energy, residual);
@@ -505,11 +582,30 @@ impl Simulator {
                 self.anderson.push(&self.update, &self.mapped);
                 if self.anderson.extrapolate(&self.update, &self.mapped, &mut self.extrapolated) {
                     let trial = self.local_step(Buffer::Extrapolated);
-                    if trial < energy {
-                        std::mem::swap(&mut self.iterate, &mut self.extrapolated);
-                        energy = trial;
-                        accepted = true;
+                    if energy_guard {
+                        if trial < energy {
+                            std::mem::swap(&mut self.iterate, &mut self.extrapolated);
+                            energy = trial;
+                            accepted = true;
+                        }
                     } else {
+                        // Residual guard: evaluate G at the extrapolation, keep it if better.
+                        self.solve_contacts(Buffer::Extrapolated);
+                        std::mem::swap(&mut self.iterate, &mut self.extrapolated);
+                        std::mem::swap(&mut self.mapped, &mut self.previous_mapped);
+                        let trial_residual = self.global_step();
+                        iterations += 1;
+                        if trial_residual < residual {
+                            energy = trial;
+                            residual = trial_residual;
+                            self.record(energy, residual);
+                            continue;
+                        }
+                        // Undo: back to x_k and G(x_k).
+                        std::mem::swap(&mut self.iterate, &mut self.extrapolated);
+                        std::mem::swap(&mut self.mapped, &mut self.previous_mapped);
+                    }
+                    if !accepted {
                         self.profile.acceleration_rejections += 1;
                         self.anderson.reset();
                     }
@@ -519,11 +615,24 @@ impl Simulator {
                 self.iterate.copy_from_slice(&self.mapped);
                 energy = self.local_step(Buffer::Iterate);
             }
+            self.solve_contacts(Buffer::Iterate);
             residual = self.global_step();
             iterations += 1;
             self.record(energy, residual);
         }
-        StepStats { iterations, residual, converged: residual <= tol }
+        StepStats { iterations, residual, converged: residual <= tol, contacts: self.contacts.counts() }
+    }
+
+    /// Adds this iteration's contact forces at the iterate to the right-hand side in `update`.
+    fn solve_contacts(&mut self, which: Buffer) {
+        if self.contacts.is_empty() {
+            return;
+        }
+        let start = Instant::now();
+        let x = std::mem::take(self.buffer(which));
+        self.contacts.solve(&x, &self.x, &self.mass, self.params.h, self.factor.matrix(), &mut self.update);
+        *self.buffer(which) = x;
+        self.profile.contact_solve += start.elapsed();
     }
 
     fn record(&mut self, energy: f64, residual: f64) {
@@ -571,6 +680,62 @@ impl Simulator {
 enum Buffer {
     Iterate,
     Extrapolated,
+}
+
+fn check_mu(name: &str, mu: f64) -> Result<()> {
+    if !(mu >= 0.0 && mu.is_finite()) {
+        return Err(Error::Config(format!("{name} must be non-negative and finite, got {mu}")));
+    }
+    Ok(())
+}
+
+fn build_shape(cfg: &ShapeConfig) -> Shape {
+    let v = Vec3::from;
+    match cfg {
+        ShapeConfig::Plane { point, normal } => {
+            let n = v(*normal);
+            Shape::Plane { point: v(*point), normal: if n.norm() > 0.0 { n.normalize() } else { n } }
+        }
+        ShapeConfig::Sphere { center, radius } => Shape::Sphere { center: v(*center), radius: *radius },
+        ShapeConfig::Capsule { a, b, radius } => Shape::Capsule { a: v(*a), b: v(*b), radius: *radius },
+        ShapeConfig::Box { center, half_extents, rotate_deg } => {
+            let [rx, ry, rz] = rotate_deg.map(f64::to_radians);
+            Shape::Box {
+                center: v(*center),
+                half_extents: v(*half_extents),
+                rotation: nalgebra::Rotation3::from_euler_angles(rx, ry, rz),
+            }
+        }
+        ShapeConfig::Bowl { center, radius, rim_height } => {
+            Shape::Bowl { center: v(*center), radius: *radius, rim_height: *rim_height }
+        }
+        ShapeConfig::Union { parts } => Shape::Union(parts.iter().map(build_shape).collect()),
+    }
+}
+
+fn build_obstacle(index: usize, cfg: &crate::config::ObstacleConfig) -> Result<Obstacle> {
+    let shape = build_shape(&cfg.shape);
+    shape.validate().map_err(|e| Error::Config(format!("obstacles[{index}]: {e}")))?;
+    check_mu(&format!("obstacles[{index}].mu"), cfg.mu)?;
+    let motion = match (&cfg.velocity, &cfg.path) {
+        (Some(_), Some(_)) => {
+            return Err(Error::Config(format!("obstacles[{index}]: give `velocity` or `path`, not both")))
+        }
+        (Some(vel), None) => Motion::Linear { velocity: Vec3::from(*vel) },
+        (None, Some(rows)) => {
+            let ok = !rows.is_empty()
+                && rows.iter().all(|r| r.iter().all(|c| c.is_finite()))
+                && rows.windows(2).all(|w| w[1][0] > w[0][0]);
+            if !ok {
+                return Err(Error::Config(format!(
+                    "obstacles[{index}].path needs finite rows [t, dx, dy, dz] with increasing t"
+                )));
+            }
+            Motion::Path(rows.iter().map(|r| (r[0], Vec3::new(r[1], r[2], r[3]))).collect())
+        }
+        (None, None) => Motion::Static,
+    };
+    Ok(Obstacle { shape, mu: cfg.mu, motion })
 }
 
 fn check_nodes(name: &str, values: &[Vec3], expected: usize) -> Result<()> {

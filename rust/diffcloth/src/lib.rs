@@ -3,7 +3,9 @@
 //! forward steps. See `DESIGN.md` for the physics.
 
 pub mod anderson;
+pub mod collision;
 pub mod config;
+pub mod contact;
 pub mod effects;
 pub mod energy;
 pub mod error;
@@ -18,6 +20,7 @@ pub mod scene;
 pub type Vec3 = nalgebra::Vector3<f64>;
 
 pub use config::{Effect, SceneConfig};
+pub use contact::{Branch, BranchCounts, Contact, ContactKind};
 pub use error::{Error, Result};
 pub use forward::{Params, Simulator, SolverSettings, StepInput, StepStats};
 pub use profile::Profile;

@@ -20,6 +20,14 @@ pub struct Profile {
     /// Numeric refactorizations of the system matrix (only when h, mass or stiffness change).
     pub refactorizations: u64,
     pub refactor: Duration,
+    /// Collision detection (obstacle queries and the self-collision spatial hash).
+    pub detection: Duration,
+    /// Per-iteration Signorini-Coulomb contact solves.
+    pub contact_solve: Duration,
+    /// Contacts at the end of each step, summed over steps, by branch.
+    pub contacts_take_off: u64,
+    pub contacts_stick: u64,
+    pub contacts_slip: u64,
     /// Everything else inside `step` (prediction, acceleration, residuals, bookkeeping).
     pub other: Duration,
     /// Total time inside `step`.
@@ -38,6 +46,11 @@ impl Profile {
             ("local_s", self.local.as_secs_f64()),
             ("global_s", self.global.as_secs_f64()),
             ("refactor_s", self.refactor.as_secs_f64()),
+            ("detection_s", self.detection.as_secs_f64()),
+            ("contact_s", self.contact_solve.as_secs_f64()),
+            ("contacts_take_off", self.contacts_take_off as f64),
+            ("contacts_stick", self.contacts_stick as f64),
+            ("contacts_slip", self.contacts_slip as f64),
             ("other_s", self.other.as_secs_f64()),
             ("total_s", self.total.as_secs_f64()),
         ]

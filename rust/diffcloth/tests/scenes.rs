@@ -25,6 +25,9 @@ fn hat_and_sock_rest_shapes_stay_at_rest() {
         let mut cfg = load_config(name);
         cfg.effects = vec![Effect::Stretch, Effect::Bend];
         cfg.attachments = None;
+        cfg.obstacles.clear();
+        cfg.self_collision = None;
+        cfg.contact = None;
         let mut sim = Simulator::new(&cfg).unwrap();
         let rest = sim.positions().to_vec();
         for _ in 0..50 {
@@ -41,6 +44,8 @@ fn hat_moves_if_bending_targeted_a_flat_shape() {
     let mut cfg = load_config("hat");
     cfg.effects = vec![Effect::Stretch, Effect::Bend, Effect::Gravity];
     cfg.attachments = None;
+    cfg.obstacles.clear();
+    cfg.self_collision = None;
     let mut sim = Simulator::new(&cfg).unwrap();
     let rest = sim.positions().to_vec();
     for _ in 0..20 {

@@ -1,0 +1,10 @@
+//! Collision detection: analytic obstacles (signed distance and normal) and node-node
+//! self-collision found with a spatial hash. Contacts act on nodes only (paper Sec. 3.2).
+
+mod obstacle;
+mod self_collision;
+mod shape;
+
+pub use obstacle::{Motion, Obstacle};
+pub use self_collision::SelfCollision;
+pub use shape::Shape;

@@ -1,0 +1,163 @@
+//! Analytic obstacle shapes. Each gives the signed distance of a point to the solid (positive
+//! in free space) and the outward unit normal (the distance's gradient). Analytic rather than
+//! triangulated surfaces: triangulated normals jump across edges (paper Sec. 5.1).
+
+use crate::Vec3;
+use nalgebra::Rotation3;
+
+#[derive(Debug, Clone)]
+pub enum Shape {
+    /// Half-space below the plane through `point` with unit `normal` (free side: the normal's).
+    Plane { point: Vec3, normal: Vec3 },
+    Sphere { center: Vec3, radius: f64 },
+    /// All points within `radius` of the segment `a`-`b`.
+    Capsule { a: Vec3, b: Vec3, radius: f64 },
+    /// An oriented box: `half_extents` along the axes of `rotation`.
+    Box { center: Vec3, half_extents: Vec3, rotation: Rotation3<f64> },
+    /// A bowl: solid below the rim plane `y = rim_height` except a spherical cavity; the free
+    /// space is the cavity (radius `radius` around `center`) plus everything above the rim.
+    Bowl { center: Vec3, radius: f64, rim_height: f64 },
+    /// Several solids together (a head on a neck, a foot and a leg).
+    Union(Vec<Shape>),
+}
+
+impl Shape {
+    /// Signed distance of `p` to the solid (negative inside) and the outward unit normal.
+    pub fn distance(&self, p: &Vec3) -> (f64, Vec3) {
+        match self {
+            Shape::Plane { point, normal } => ((p - point).dot(normal), *normal),
+            Shape::Sphere { center, radius } => {
+                let (len, dir) = length_and_direction(p - center);
+                (len - radius, dir)
+            }
+            Shape::Capsule { a, b, radius } => {
+                let ab = b - a;
+                let t = ((p - a).dot(&ab) / ab.norm_squared().max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
+                let (len, dir) = length_and_direction(p - (a + t * ab));
+                (len - radius, dir)
+            }
+            Shape::Box { center, half_extents, rotation } => {
+                let local = rotation.inverse() * (p - center);
+                let q = local.abs() - half_extents;
+                let outside = q.sup(&Vec3::zeros());
+                if outside.norm_squared() > 0.0 {
+                    let dir = outside.component_mul(&local.map(f64::signum));
+                    (outside.norm(), rotation * dir.normalize())
+                } else {
+                    let k = q.imax();
+                    let mut dir = Vec3::zeros();
+                    dir[k] = local[k].signum();
+                    (q[k], rotation * dir)
+                }
+            }
+            Shape::Bowl { center, radius, rim_height } => {
+                let (len, dir) = length_and_direction(p - center);
+                let in_cavity = radius - len;
+                let above_rim = p.y - rim_height;
+                if in_cavity >= above_rim {
+                    (in_cavity, -dir)
+                } else {
+                    (above_rim, Vec3::y())
+                }
+            }
+            Shape::Union(parts) => parts
+                .iter()
+                .map(|s| s.distance(p))
+                .min_by(|a, b| a.0.total_cmp(&b.0))
+                .unwrap_or((f64::INFINITY, Vec3::y())),
+        }
+    }
+
+    /// Checks dimensions; returns a message naming the problem.
+    pub fn validate(&self) -> Result<(), String> {
+        let finite = |v: &Vec3| v.iter().all(|c| c.is_finite());
+        match self {
+            Shape::Plane { point, normal } => {
+                if !finite(point) || !finite(normal) || normal.norm() == 0.0 {
+                    return Err("plane needs a finite point and a non-zero normal".into());
+                }
+            }
+            Shape::Sphere { center, radius } | Shape::Bowl { center, radius, .. } => {
+                if !finite(center) || !(*radius > 0.0 && radius.is_finite()) {
+                    return Err(format!("radius must be positive and the center finite, got {radius}"));
+                }
+            }
+            Shape::Capsule { a, b, radius } => {
+                if !finite(a) || !finite(b) || !(*radius > 0.0 && radius.is_finite()) {
+                    return Err(format!("capsule needs finite end points and a positive radius, got {radius}"));
+                }
+            }
+            Shape::Box { center, half_extents, .. } => {
+                if !finite(center) || !half_extents.iter().all(|&h| h > 0.0 && h.is_finite()) {
+                    return Err("box half_extents must be positive".into());
+                }
+            }
+            Shape::Union(parts) => {
+                if parts.is_empty() {
+                    return Err("union needs at least one part".into());
+                }
+                for p in parts {
+                    p.validate()?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// `(|v|, v / |v|)`, with an arbitrary fixed direction (+y) at the degenerate point.
+fn length_and_direction(v: Vec3) -> (f64, Vec3) {
+    let len = v.norm();
+    if len > 0.0 {
+        (len, v / len)
+    } else {
+        (0.0, Vec3::y())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The normal is the gradient of the signed distance (central differences).
+    fn check_gradient(s: &Shape, p: Vec3) {
+        let (_, n) = s.distance(&p);
+        let eps = 1e-6;
+        for k in 0..3 {
+            let mut e = Vec3::zeros();
+            e[k] = eps;
+            let fd = (s.distance(&(p + e)).0 - s.distance(&(p - e)).0) / (2.0 * eps);
+            assert!((fd - n[k]).abs() < 1e-6, "{s:?} at {p:?}: d/dx{k} {fd} vs normal {}", n[k]);
+        }
+        assert!((n.norm() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn distances_and_normals() {
+        let plane = Shape::Plane { point: Vec3::new(0.0, 1.0, 0.0), normal: Vec3::y() };
+        assert_eq!(plane.distance(&Vec3::new(5.0, 3.0, 2.0)).0, 2.0);
+        let sphere = Shape::Sphere { center: Vec3::zeros(), radius: 2.0 };
+        assert!((sphere.distance(&Vec3::new(0.0, 0.0, 3.0)).0 - 1.0).abs() < 1e-15);
+        let capsule = Shape::Capsule { a: Vec3::zeros(), b: Vec3::new(0.0, 4.0, 0.0), radius: 0.5 };
+        assert!((capsule.distance(&Vec3::new(1.0, 2.0, 0.0)).0 - 0.5).abs() < 1e-15);
+        assert!((capsule.distance(&Vec3::new(0.0, 5.0, 0.0)).0 - 0.5).abs() < 1e-15);
+        let boxed = Shape::Box {
+            center: Vec3::zeros(),
+            half_extents: Vec3::new(1.0, 2.0, 3.0),
+            rotation: Rotation3::from_euler_angles(0.0, 0.3, 0.0),
+        };
+        assert!((boxed.distance(&Vec3::new(0.0, 2.5, 0.0)).0 - 0.5).abs() < 1e-12);
+        assert!((boxed.distance(&Vec3::zeros()).0 + 1.0).abs() < 1e-12);
+        let bowl = Shape::Bowl { center: Vec3::zeros(), radius: 2.0, rim_height: 0.5 };
+        assert!((bowl.distance(&Vec3::new(0.0, -1.5, 0.0)).0 - 0.5).abs() < 1e-15, "inside the cavity");
+        assert!(bowl.distance(&Vec3::new(0.0, -2.5, 0.0)).0 < 0.0, "in the bowl's wall");
+        assert!(bowl.distance(&Vec3::new(5.0, 1.0, 0.0)).0 > 0.0, "above the rim");
+        let union = Shape::Union(vec![sphere.clone(), capsule.clone()]);
+        assert!((union.distance(&Vec3::new(0.0, 0.0, 3.0)).0 - 1.0).abs() < 1e-15);
+        for p in [Vec3::new(0.3, 2.7, -0.4), Vec3::new(1.5, -0.2, 0.9), Vec3::new(-0.7, 0.1, 3.3)] {
+            for s in [&plane, &sphere, &capsule, &boxed, &bowl, &union] {
+                check_gradient(s, p);
+            }
+        }
+    }
+}
