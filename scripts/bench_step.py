@@ -11,16 +11,22 @@ step on Hat at its tolerance 1e-8. Plain PD with a fixed 150 iterations per step
 (`plain@150it`, the same algorithm) gives that accuracy here; the `anderson@match` row is the
 loosest Anderson tolerance whose trajectory error is at most that.
 
-Writes benchmarks/results/step_time.{json,md}. `--mesh PATH` times an OBJ mesh instead (e.g.
+With `--suite contact` (or `all`, the default) it also times the contact scenes (Slope
+12/24/48, Sphere, Bowl, Hat, Sock) at the default solver settings: ms/step, contacts per step by
+branch, share of time per stage, and `contact_adds_pct` = time in detection + contact solve
+relative to the rest of the step (target at Slope, every node in contact: <= 50 %).
+
+Writes benchmarks/results/step_time.{json,md}; a suite run replaces only its own rows. `--mesh PATH` times an OBJ mesh instead (e.g.
 the reference meshes) with the Wind scene's material and its two top corners pinned.
 
-Run: .venv/bin/python scripts/bench_step.py [--quick] [--mesh PATH ...]
+Run: .venv/bin/python scripts/bench_step.py [--suite forward|contact|all] [--quick] [--mesh PATH ...]
 """
 
 from __future__ import annotations
 
 import argparse
 import copy
+import json
 import os
 import sys
 import tomllib
@@ -77,8 +83,74 @@ def main() -> None:
     p.add_argument("--mesh", nargs="*", help="OBJ meshes to time instead of the built-in scenes")
     p.add_argument("--quick", action="store_true", help="fewer steps, for a smoke run")
     p.add_argument("--out", default=None, help="output folder (default benchmarks/results)")
+    p.add_argument("--suite", choices=["forward", "contact", "all"], default="all")
     args = p.parse_args()
     steps = 20 if args.quick else args.steps
+    out_dir = Path(args.out) if args.out else results.RESULTS_DIR
+    previous = out_dir / "step_time.json"
+    rows = json.loads(previous.read_text())["rows"] if previous.exists() and not args.mesh else []
+    if args.suite in ("forward", "all"):
+        rows = [r for r in rows if r.get("suite", "forward") != "forward"] + forward_rows(args, steps)
+    if args.suite in ("contact", "all") and not args.mesh:
+        rows = [r for r in rows if r.get("suite", "forward") != "contact"] + contact_rows(args)
+    notes = (
+        f"Forward suite: {steps} steps per rollout; time is inside Rust (profile total), `threads` = 1 (serial "
+        f"local step) or all ({os.cpu_count()}: parallel local step for >= 2048 constraints). `traj_rel_err` = "
+        "norm(X - X_ref) / norm(X_ref - X_0) over the rollout, X_ref = Anderson at tolerance 1e-13. Tolerance = "
+        "RMS per-coordinate PD update in metres. Reference C++ (single thread, tol 1e-8): Hat 42-86 ms/step "
+        "(111-219 iterations, 0.39 ms/iteration); Wind 12/24/48: 2.1 / 26 / 264 ms/step; Slope 12/24/48: "
+        "0.22 / 1.5 / 9.1 ms/step; Sock 164 ms/step. Contact suite: default solver (Anderson, tolerance 1e-8), "
+        "one thread; `contact_adds_pct` = (detection + contact solve) / (rest of the step)."
+    )
+    out = results.write("step_time", rows, results.meta({"steps": steps}), "Forward step time", notes, out_dir=out_dir)
+    print(results.markdown_table(rows))
+    print(f"wrote {out}")
+
+
+CONTACT_SCENES = [("slope", 12, 100), ("slope", 24, 100), ("slope", 48, 100), ("sphere", None, 150), ("bowl", None, 100), ("hat", None, 100), ("sock", None, 100)]
+
+
+def contact_rows(args) -> list[dict]:
+    rows = []
+    for name, res, steps in CONTACT_SCENES:
+        cfg = tomllib.loads((CONFIG_DIR / f"{name}.toml").read_text())
+        if res:
+            cfg["mesh"].update(rows=res, cols=res)
+        steps = 20 if args.quick else steps
+        sim = Simulator.from_config(cfg)
+        sim.set_solver(parallel=False)
+        for _ in range(steps):
+            sim.step()
+        p = sim.profile()
+        total = p["total_s"]
+        contact_s = p["detection_s"] + p["contact_s"]
+        contacts = p["contacts_take_off"] + p["contacts_stick"] + p["contacts_slip"]
+        rows.append({
+            "suite": "contact",
+            "scene": f"{name}{res}x{res}" if res else name,
+            "nodes": sim.num_nodes,
+            "dof": 3 * sim.num_nodes,
+            "solver": "anderson",
+            "tolerance": sim.solver()["tolerance"],
+            "threads": 1,
+            "ms_per_step": 1e3 * total / steps,
+            "iters_per_step": p["iterations"] / steps,
+            "ms_per_iter": 1e3 * total / max(p["iterations"], 1),
+            "contacts_per_step": contacts / steps,
+            "stick_per_step": p["contacts_stick"] / steps,
+            "slip_per_step": p["contacts_slip"] / steps,
+            "local_pct": 100 * p["local_s"] / total,
+            "global_pct": 100 * p["global_s"] / total,
+            "detection_pct": 100 * p["detection_s"] / total,
+            "contact_pct": 100 * p["contact_s"] / total,
+            "contact_adds_pct": 100 * contact_s / max(total - contact_s, 1e-12),
+            "unconverged_pct": 100.0 * p["unconverged_steps"] / steps,
+        })
+        print(f"{rows[-1]['scene']}: done", flush=True)
+    return rows
+
+
+def forward_rows(args, steps) -> list[dict]:
     rows = []
     for name, cfg in scene_configs(args):
         ref, _, _ = rollout(cfg, steps, dict(tolerance=1e-13, max_iterations=20000, acceleration="anderson"), True)
@@ -109,23 +181,12 @@ def main() -> None:
                     rows.append(row(name, nodes, "anderson@match", solver, parallel, prof, unconv, steps, trajectory_error(traj, ref)))
                 break
         print(f"{name}: done ({nodes} nodes)", flush=True)
-    notes = (
-        f"{steps} steps per rollout; time is inside Rust (profile total), `threads` = 1 (serial local step) or "
-        f"all ({os.cpu_count()}: parallel local step for >= 2048 constraints). `traj_rel_err` = norm(X - X_ref) / "
-        "norm(X_ref - X_0) over the rollout, X_ref = Anderson at tolerance 1e-13. Tolerance = RMS per-coordinate PD "
-        "update in metres. Reference C++ (single thread, tol 1e-8): Hat 42-86 ms/step (111-219 iterations, "
-        "0.39 ms/iteration); Wind 12/24/48: 2.1 / 26 / 264 ms/step."
-    )
-    out = results.write(
-        "step_time", rows, results.meta({"steps": steps}), "Forward step time", notes,
-        out_dir=args.out,
-    )
-    print(results.markdown_table(rows))
-    print(f"wrote {out}")
+    return rows
 
 
 def row(name, nodes, solver_name, solver, parallel, prof, unconv, steps, err) -> dict:
     return {
+        "suite": "forward",
         "scene": name,
         "nodes": nodes,
         "dof": 3 * nodes,

@@ -149,11 +149,13 @@ impl ContactSet {
     ) {
         self.contacts.clear();
         let friction = |mu: f64| if settings.friction { mu } else { 0.0 };
-        for (j, (p, vj)) in x.iter().zip(v).enumerate() {
-            let reach = settings.thickness + settings.margin + 2.0 * h * vj.norm();
-            for (o, obstacle) in obstacles.iter().enumerate() {
-                let (distance, normal, velocity) = obstacle.query(p, t);
-                if distance < reach + 2.0 * h * velocity.norm() {
+        for (o, obstacle) in obstacles.iter().enumerate() {
+            // The obstacle's placement and velocity are evaluated once per step.
+            let (offset, velocity) = obstacle.motion.at(t);
+            let obstacle_reach = settings.thickness + settings.margin + 2.0 * h * velocity.norm();
+            for (j, (p, vj)) in x.iter().zip(v).enumerate() {
+                let (distance, normal) = obstacle.shape.distance(&(p - offset));
+                if distance < obstacle_reach + 2.0 * h * vj.norm() {
                     self.contacts.push(Contact {
                         kind: ContactKind::Obstacle { node: j, obstacle: o },
                         normal,
