@@ -128,6 +128,35 @@ impl Bend {
     }
 }
 
+impl Bend {
+    pub fn centers(&self) -> &[usize] {
+        &self.center
+    }
+    /// Neighbours and coefficients of constraint `i` (`A_i x = sum_j c_ij (x_j - x_i)`).
+    pub fn stencil(&self, i: usize) -> (&[usize], &[f64]) {
+        let r = self.offsets[i]..self.offsets[i + 1];
+        (&self.neighbor[r.clone()], &self.coef[r])
+    }
+    pub fn weight(&self, i: usize) -> f64 {
+        self.weight[i]
+    }
+    pub fn area(&self, i: usize) -> f64 {
+        self.area[i]
+    }
+    /// Jacobian of the projection `p = r v / |v|` at `v = A_i x`: `(r / |v|)(I - v^ v^T)`
+    /// (zero on a flat rest shape, where `p = 0`).
+    pub fn projection_jacobian(&self, i: usize, x: &[Vec3]) -> nalgebra::Matrix3<f64> {
+        let r = self.rest_length[i];
+        let v = self.curvature(i, x);
+        let len = v.norm();
+        if r == 0.0 || len == 0.0 {
+            return nalgebra::Matrix3::zeros();
+        }
+        let n = v / len;
+        (r / len) * (nalgebra::Matrix3::identity() - n * n.transpose())
+    }
+}
+
 impl PdConstraints for Bend {
     fn add_system_triplets(&self, out: &mut Vec<(usize, usize, f64)>) {
         for i in 0..self.len() {
@@ -249,6 +278,30 @@ mod tests {
         for i in 0..b.len() {
             let k = b.curvature(i, &m.positions).norm();
             assert!((k - 1.0 / 1.5).abs() < 0.02, "vertex {}: {k}", b.center[i]);
+        }
+    }
+
+    #[test]
+    fn projection_jacobian_matches_finite_differences() {
+        let m = curved_mesh();
+        let b = Bend::new(&m, 1.0);
+        let x = jitter(&m.positions, 0.05, 9);
+        for i in 0..b.len() {
+            let jac = b.projection_jacobian(i, &x);
+            // Perturb the curvature vector through one neighbour (A_i is linear).
+            // (via the neighbour with the largest coefficient: right angles give zero weights).
+            let (nbrs, coefs) = b.stencil(i);
+            let k = (0..nbrs.len()).max_by(|&a, &b| coefs[a].abs().total_cmp(&coefs[b].abs())).unwrap();
+            let (j, c) = (nbrs[k], coefs[k]);
+            for d in 0..3 {
+                let eps = 1e-6;
+                let mut xp = x.clone();
+                xp[j][d] += eps;
+                let mut xm = x.clone();
+                xm[j][d] -= eps;
+                let fd = (b.project_one(i, &xp).0 - b.project_one(i, &xm).0) / (2.0 * eps * c);
+                assert!((fd - jac.column(d)).norm() < 1e-5, "constraint {i} dim {d}");
+            }
         }
     }
 

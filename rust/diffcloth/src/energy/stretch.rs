@@ -224,11 +224,103 @@ pub fn project_singular_values(f: &Mat32, lo: f64, hi: f64) -> Mat32 {
     t1 * u1 * v1.transpose() + t2 * u2 * v2.transpose()
 }
 
+/// Jacobian of [`project_singular_values`] with respect to F, as a 6x6 matrix acting on F
+/// flattened column by column (`[F[:,0]; F[:,1]]`). From the derivative of a singular-value
+/// function of a 3x2 matrix: in the frame `dF^ = U^T dF V` (U completed to 3x3),
+/// `dP^_ii = f'(s_i) dF^_ii`, the 2x2 off-diagonal block mixes the symmetric and
+/// antisymmetric parts with `(f1 - f2) / (s1 - s2)` and `(f1 + f2) / (s1 + s2)`, and the third
+/// row scales by `f_j / s_j`. Symmetric (a nearest-point projection).
+pub fn projection_jacobian(f: &Mat32, lo: f64, hi: f64) -> [[f64; 6]; 6] {
+    let (s1, s2, v1, v2) = singular_2d(f);
+    let tiny = 1e-12 * s1.max(1e-300);
+    let (s1c, s2c) = (s1.max(tiny), s2.max(tiny));
+    let u1 = f * v1 / s1c;
+    let mut u2 = f * v2;
+    u2 -= u1 * u1.dot(&u2);
+    let u2 = if u2.norm() > tiny { u2.normalize() } else { complete(&u1) };
+    let u3 = u1.cross(&u2);
+    let (f1, f2) = (s1.clamp(lo, hi), s2.clamp(lo, hi));
+    let slope = |s: f64| if s > lo && s < hi { 1.0 } else { 0.0 };
+    let (d1, d2) = (slope(s1), slope(s2));
+    let diff = if (s1 - s2).abs() > 1e-10 * s1.max(1e-300) { (f1 - f2) / (s1 - s2) } else { 0.5 * (d1 + d2) };
+    let sum = (f1 + f2) / (s1c + s2c);
+    let u = nalgebra::Matrix3::from_columns(&[u1, u2, u3]);
+    let v = Matrix2::from_columns(&[v1, v2]);
+    let mut jac = [[0.0; 6]; 6];
+    for k in 0..6 {
+        let mut df = Mat32::zeros();
+        df[(k % 3, k / 3)] = 1.0;
+        let h = u.transpose() * df * v;
+        let mut dp = Mat32::zeros();
+        dp[(0, 0)] = d1 * h[(0, 0)];
+        dp[(1, 1)] = d2 * h[(1, 1)];
+        let (a, b) = (h[(0, 1)], h[(1, 0)]);
+        dp[(0, 1)] = 0.5 * sum * (a - b) + 0.5 * diff * (a + b);
+        dp[(1, 0)] = -0.5 * sum * (a - b) + 0.5 * diff * (a + b);
+        dp[(2, 0)] = f1 / s1c * h[(2, 0)];
+        dp[(2, 1)] = f2 / s2c * h[(2, 1)];
+        let out = u * dp * v.transpose();
+        for r in 0..6 {
+            jac[r][k] = out[(r % 3, r / 3)];
+        }
+    }
+    jac
+}
+
+/// A unit vector orthogonal to `u`.
+fn complete(u: &Vec3) -> Vec3 {
+    let axis = u.iamin();
+    let mut e = Vec3::zeros();
+    e[axis] = 1.0;
+    (e - u * u[axis]).normalize()
+}
+
+impl Stretch {
+    pub fn triangles(&self) -> &[[usize; 3]] {
+        &self.triangles
+    }
+    /// The selector rows `b_l` of triangle `t` (`F = sum_l x_l b_l^T`).
+    pub fn shape(&self, t: usize) -> &[Vector2<f64>; 3] {
+        &self.shape[t]
+    }
+    pub fn weight(&self, t: usize) -> f64 {
+        self.weight[t]
+    }
+    pub fn rest_area(&self, t: usize) -> f64 {
+        self.rest_area[t]
+    }
+    pub fn strain_limits(&self) -> (f64, f64) {
+        (self.strain_min, self.strain_max)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::energy::testing::*;
     use crate::mesh::{grid, GridPlane};
+
+    #[test]
+    fn projection_jacobian_matches_finite_differences() {
+        for (seed, (lo, hi)) in (0..40).zip([(1.0, 1.0), (0.9, 1.1), (0.95, 1.3)].iter().cycle()) {
+            let f = random_f(seed);
+            let jac = projection_jacobian(&f, *lo, *hi);
+            let eps = 1e-6;
+            for k in 0..6 {
+                let mut df = Mat32::zeros();
+                df[(k % 3, k / 3)] = eps;
+                let fd = (project_singular_values(&(f + df), *lo, *hi) - project_singular_values(&(f - df), *lo, *hi)) / (2.0 * eps);
+                for r in 0..6 {
+                    assert!((fd[(r % 3, r / 3)] - jac[r][k]).abs() < 1e-6, "seed {seed} [{r}][{k}]: {} vs {}", jac[r][k], fd[(r % 3, r / 3)]);
+                }
+            }
+            for r in 0..6 {
+                for k in 0..6 {
+                    assert!((jac[r][k] - jac[k][r]).abs() < 1e-10, "symmetric");
+                }
+            }
+        }
+    }
 
     fn random_f(seed: u64) -> Mat32 {
         let v = jitter(&[Vec3::zeros(), Vec3::zeros()], 1.5, seed);
