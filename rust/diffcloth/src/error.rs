@@ -23,6 +23,9 @@ pub enum Error {
     /// A factorization or linear solve failed (e.g. matrix not positive definite).
     #[error("linear solver failed: {0}")]
     Solver(String),
+    /// A feature that is not available for this input yet (the message says which).
+    #[error("not supported: {0}")]
+    Unsupported(String),
     /// The state became non-finite; the step was rolled back.
     #[error("simulation diverged: {0}")]
     Diverged(String),

@@ -46,6 +46,11 @@ impl Wind {
         Ok(())
     }
 
+    /// Per-node coefficient `k_a` (including the node area when per area).
+    pub fn coefficient(&self) -> &[f64] {
+        &self.coefficient
+    }
+
     /// Temporal factor `0.5 (sin(omega t + phi) + 1)`.
     pub fn modulation(&self, t: f64) -> f64 {
         0.5 * ((self.omega * t + self.phi).sin() + 1.0)

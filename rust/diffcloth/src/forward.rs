@@ -14,6 +14,7 @@ use crate::linalg::SpdFactor;
 use crate::mesh::TriMesh;
 use crate::profile::{timed, Profile};
 use crate::scene::{attachment_nodes, build_mesh};
+use crate::tape::{StepRecord, Tape};
 use crate::Vec3;
 use std::time::Instant;
 
@@ -106,6 +107,7 @@ pub struct Simulator {
     extrapolated: Vec<Vec3>,
     anderson: Anderson,
     trace: Option<Vec<(f64, f64)>>,
+    tape: Option<Tape>,
     profile: Profile,
     last: StepStats,
 }
@@ -220,6 +222,7 @@ impl Simulator {
             extrapolated: vec![Vec3::zeros(); n],
             anderson: Anderson::new(config.solver.history, n),
             trace: None,
+            tape: None,
             profile: Profile::default(),
             last: StepStats::default(),
             node_area,
@@ -306,6 +309,26 @@ impl Simulator {
     pub fn stretch(&self) -> Option<&Stretch> {
         self.stretch.as_ref()
     }
+    pub fn bend(&self) -> Option<&Bend> {
+        self.bend.as_ref()
+    }
+    pub fn wind(&self) -> Option<&Wind> {
+        self.wind.as_ref()
+    }
+    /// Each node's share of the rest area (m^2); mass = density x area.
+    pub fn node_areas(&self) -> &[f64] {
+        &self.node_area
+    }
+    pub(crate) fn factor(&self) -> &SpdFactor {
+        &self.factor
+    }
+    /// Starts (clearing any previous tape) or stops recording steps for `backward`.
+    pub fn set_recording(&mut self, on: bool) {
+        self.tape = on.then(Tape::default);
+    }
+    pub fn tape(&self) -> Option<&Tape> {
+        self.tape.as_ref()
+    }
     /// The current step's contacts (frames, branches and impulses of the last step).
     pub fn contacts(&self) -> &[Contact] {
         &self.contacts.contacts
@@ -358,6 +381,9 @@ impl Simulator {
         }
         self.time = 0.0;
         self.step_count = 0;
+        if let Some(tape) = self.tape.as_mut() {
+            tape.records.clear();
+        }
         Ok(())
     }
 
@@ -446,6 +472,17 @@ impl Simulator {
                 "non-finite positions at step {}; state left at the previous step",
                 self.step_count
             )));
+        }
+        if let Some(tape) = self.tape.as_mut() {
+            tape.records.push(StepRecord {
+                x_prev: self.x.clone(),
+                v_prev: self.v.clone(),
+                x_next: self.mapped.clone(),
+                targets: self.attachments.as_ref().map_or(Vec::new(), |a| a.targets().to_vec()),
+                time: self.time,
+                contacts: self.contacts.contacts.clone(),
+                residual: stats.residual,
+            });
         }
         for ((x, v), xn) in self.x.iter_mut().zip(self.v.iter_mut()).zip(&self.mapped) {
             *v = (xn - *x) / h;

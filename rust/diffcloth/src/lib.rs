@@ -3,6 +3,7 @@
 //! forward steps. See `DESIGN.md` for the physics.
 
 pub mod anderson;
+pub mod backward;
 pub mod collision;
 pub mod config;
 pub mod contact;
@@ -15,6 +16,7 @@ pub mod linalg;
 pub mod mesh;
 pub mod profile;
 pub mod scene;
+pub mod tape;
 
 /// 3-vectors are nalgebra's (node positions, velocities, forces).
 pub type Vec3 = nalgebra::Vector3<f64>;
@@ -22,6 +24,7 @@ pub type Vec3 = nalgebra::Vector3<f64>;
 pub use config::{Effect, SceneConfig};
 pub use contact::{Branch, BranchCounts, Contact, ContactKind};
 pub use error::{Error, Result};
+pub use backward::{AdjointSolver, BackwardOptions, Gradients};
 pub use forward::{Params, Simulator, SolverSettings, StepInput, StepStats};
 pub use profile::Profile;
 

@@ -122,6 +122,33 @@ impl SpdFactor {
         }
     }
 
+    /// Scratch needed by [`SpdFactor::solve_columns`] and [`SpdFactor::solve_nodes`].
+    pub fn solve_scratch(&self) -> faer::dyn_stack::StackReq {
+        self.symbolic.solve_in_place_scratch::<f64>(3, Par::Seq)
+    }
+
+    /// Solves `P_s X = B` for an n x k column block in place (no internal state touched, so
+    /// it can serve as a shared preconditioner).
+    pub fn solve_columns(&self, rhs: faer::MatMut<'_, f64>, stack: &mut MemStack) {
+        LltRef::new(&self.symbolic, &self.l_values).solve_in_place_with_conj(Conj::No, rhs, Par::Seq, stack);
+    }
+
+    /// Like [`SpdFactor::solve_xyz`] without touching internal buffers.
+    pub fn solve_nodes(&self, rhs: &mut [Vec3], stack: &mut MemStack) {
+        let mut cols = Mat::<f64>::zeros(self.n, 3);
+        for (i, r) in rhs.iter().enumerate() {
+            for c in 0..3 {
+                cols[(i, c)] = r[c];
+            }
+        }
+        self.solve_columns(cols.as_mut(), stack);
+        for (i, r) in rhs.iter_mut().enumerate() {
+            for c in 0..3 {
+                r[c] = cols[(i, c)];
+            }
+        }
+    }
+
     /// `out = P_s x` (per coordinate), using the lower triangle and symmetry... the matrix is
     /// stored with both triangles, so this is a plain sparse product.
     pub fn mul_xyz(&self, x: &[Vec3], out: &mut [Vec3]) {

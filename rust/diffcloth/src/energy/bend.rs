@@ -113,6 +113,11 @@ impl Bend {
             .sum()
     }
 
+    /// The projection of constraint `i` at `x`.
+    pub fn projection(&self, i: usize, x: &[Vec3]) -> Vec3 {
+        self.project_one(i, x).0
+    }
+
     fn project_one(&self, i: usize, x: &[Vec3]) -> (Vec3, f64) {
         let v = self.curvature(i, x);
         let target = self.rest_length[i];

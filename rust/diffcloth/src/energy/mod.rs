@@ -11,7 +11,7 @@ mod stretch;
 
 pub use attachment::Attachments;
 pub use bend::Bend;
-pub use stretch::{project_singular_values, Stretch};
+pub use stretch::{project_singular_values, projection_jacobian as stretch_projection_jacobian, Stretch};
 
 use crate::Vec3;
 

@@ -1,0 +1,575 @@
+//! Adjoint of the recorded steps (paper Sec. 4, Eqns. 13-30), without contact so far.
+//!
+//! Step n solves `g(x_{n+1}) = M (x_{n+1} - y) / h^2 + grad W(x_{n+1}) = 0` with
+//! `y = x_n + h v_n + h^2 M^{-1} f` and `v_{n+1} = (x_{n+1} - x_n) / h`. Its Jacobian is
+//! `H = P - dP`, `dP = sum_i w_i A_i^T (dp_i/d(A_i x)) A_i` (paper Eqn. 29 with dR = 0), and
+//! the adjoint `z` solves `H z = dL/dx_{n+1} + dL/dv_{n+1} / h`. Then
+//! `dL/dx_n = M z / h^2 - dL/dv_{n+1} / h`, `dL/dv_n = M z / h`, `dL/df_n = z`, and every
+//! parameter theta gets `-z . dg/dtheta`.
+
+use crate::contact::Branch;
+use crate::energy::{stretch_projection_jacobian as stretch_jacobian, Bend, Stretch};
+use crate::error::{Error, Result};
+use crate::forward::Simulator;
+use crate::linalg::SpdFactor;
+use crate::tape::StepRecord;
+use crate::Vec3;
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::matrix_free::bicgstab::{bicgstab, bicgstab_scratch, BicgParams};
+use faer::matrix_free::{IdentityPrecond, InitialGuessStatus, LinOp, Precond};
+use faer::prelude::*;
+use faer::sparse::{SparseColMat, Triplet};
+use faer::{Mat, MatMut, MatRef, Par};
+use nalgebra::Matrix3;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+/// How the adjoint system `H z = g` is solved (selectable per call).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AdjointSolver {
+    /// Sparse LU of the assembled `H` (the reference).
+    Direct,
+    /// BiCGStab preconditioned by the PD factorization of `P` (the default).
+    Krylov,
+    /// The paper's Eqn. 30: `P z_{k+1} = dP z_k + g`, reusing the PD factorization.
+    FixedPoint,
+}
+
+#[derive(Debug, Clone)]
+pub struct BackwardOptions {
+    pub solver: AdjointSolver,
+    /// Relative residual `|g - H z| / |g|` at which an iterative solve stops.
+    pub tolerance: f64,
+    /// Iteration cap of the iterative solvers (then: fall back to `Direct`).
+    pub max_iterations: usize,
+}
+
+impl Default for BackwardOptions {
+    fn default() -> Self {
+        Self { solver: AdjointSolver::Krylov, tolerance: 1e-10, max_iterations: 500 }
+    }
+}
+
+/// What the adjoint solve of one step did.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct AdjointStepStats {
+    pub iterations: usize,
+    /// The iterative solver stalled or diverged and the direct solve was used.
+    pub fell_back: bool,
+    /// Final relative residual.
+    pub residual: f64,
+}
+
+/// Time per backward stage (the columns of the paper's Table 1).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct BackwardProfile {
+    /// Projection Jacobians (dP).
+    pub dp: Duration,
+    /// Contact linearization (dR).
+    pub dr: Duration,
+    pub solve: Duration,
+    pub other: Duration,
+}
+
+/// Gradients of the loss with respect to everything the rollout depends on.
+#[derive(Debug, Clone, Default)]
+pub struct Gradients {
+    pub x0: Vec<Vec3>,
+    pub v0: Vec<Vec3>,
+    /// Per recorded step: attachment targets (the actions) and external forces.
+    pub attachment_targets: Vec<Vec<Vec3>>,
+    pub external_forces: Vec<Vec<Vec3>>,
+    pub k_stretch: f64,
+    pub k_bend: f64,
+    pub k_attach: f64,
+    pub density: f64,
+    pub gravity: Vec3,
+    pub wind_direction: Vec3,
+    pub wind_omega: f64,
+    pub wind_phi: f64,
+    pub steps: Vec<AdjointStepStats>,
+    pub profile: BackwardProfile,
+}
+
+/// The linearization of one step at its end state: per-constraint projection Jacobians.
+struct Linearization {
+    stretch: Vec<[[f64; 6]; 6]>,
+    bend: Vec<Matrix3<f64>>,
+}
+
+impl Linearization {
+    fn new(sim: &Simulator) -> Self {
+        Self {
+            stretch: vec![[[0.0; 6]; 6]; sim.stretch().map_or(0, Stretch::len)],
+            bend: vec![Matrix3::zeros(); sim.bend().map_or(0, Bend::len)],
+        }
+    }
+
+    fn update(&mut self, sim: &Simulator, x: &[Vec3]) {
+        if let Some(s) = sim.stretch() {
+            let (lo, hi) = s.strain_limits();
+            for (t, j) in self.stretch.iter_mut().enumerate() {
+                *j = stretch_jacobian(&s.deformation_gradient(t, x), lo, hi);
+            }
+        }
+        if let Some(b) = sim.bend() {
+            for (i, j) in self.bend.iter_mut().enumerate() {
+                *j = b.projection_jacobian(i, x);
+            }
+        }
+    }
+
+    /// `out -= dP v`, constraint by constraint (never assembled for the iterative solvers).
+    fn sub_dp(&self, sim: &Simulator, v: &[Vec3], out: &mut [Vec3]) {
+        if let Some(s) = sim.stretch() {
+            for (t, tri) in s.triangles().iter().enumerate() {
+                let b = s.shape(t);
+                let mut df = [0.0; 6];
+                for l in 0..3 {
+                    for c in 0..3 {
+                        df[c] += v[tri[l]][c] * b[l][0];
+                        df[3 + c] += v[tri[l]][c] * b[l][1];
+                    }
+                }
+                let j = &self.stretch[t];
+                let mut q = [0.0; 6];
+                for (r, qr) in q.iter_mut().enumerate() {
+                    *qr = (0..6).map(|k| j[r][k] * df[k]).sum();
+                }
+                let w = s.weight(t);
+                for l in 0..3 {
+                    for c in 0..3 {
+                        out[tri[l]][c] -= w * (q[c] * b[l][0] + q[3 + c] * b[l][1]);
+                    }
+                }
+            }
+        }
+        if let Some(bend) = sim.bend() {
+            for (i, &center) in bend.centers().iter().enumerate() {
+                let (nbrs, coefs) = bend.stencil(i);
+                let dv: Vec3 = nbrs.iter().zip(coefs).map(|(&j, &c)| c * (v[j] - v[center])).sum();
+                let q = bend.weight(i) * (self.bend[i] * dv);
+                for (&j, &c) in nbrs.iter().zip(coefs) {
+                    out[j] -= c * q;
+                    out[center] += c * q;
+                }
+            }
+        }
+    }
+
+    /// Triplets of `H = P_s (x) I_3 - dP` (3m x 3m) for the direct solver.
+    fn assemble(&self, sim: &Simulator, p: &SparseColMat<usize, f64>) -> Vec<Triplet<usize, usize, f64>> {
+        let mut t = Vec::new();
+        let pr = p.as_ref();
+        for col in 0..pr.ncols() {
+            for (row, &val) in pr.row_idx_of_col(col).zip(pr.val_of_col(col)) {
+                for d in 0..3 {
+                    t.push(Triplet::new(3 * row + d, 3 * col + d, val));
+                }
+            }
+        }
+        if let Some(s) = sim.stretch() {
+            for (k, tri) in s.triangles().iter().enumerate() {
+                let (b, j, w) = (s.shape(k), &self.stretch[k], s.weight(k));
+                for l in 0..3 {
+                    for m in 0..3 {
+                        for c in 0..3 {
+                            for e in 0..3 {
+                                let mut val = 0.0;
+                                for kk in 0..2 {
+                                    for mm in 0..2 {
+                                        val += b[l][kk] * j[c + 3 * kk][e + 3 * mm] * b[m][mm];
+                                    }
+                                }
+                                t.push(Triplet::new(3 * tri[l] + c, 3 * tri[m] + e, -w * val));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        if let Some(bend) = sim.bend() {
+            for (i, &center) in bend.centers().iter().enumerate() {
+                let (nbrs, coefs) = bend.stencil(i);
+                let center_coef: f64 = -coefs.iter().sum::<f64>();
+                let nodes: Vec<(usize, f64)> =
+                    std::iter::once((center, center_coef)).chain(nbrs.iter().copied().zip(coefs.iter().copied())).collect();
+                let jw = bend.weight(i) * self.bend[i];
+                for &(a, ca) in &nodes {
+                    for &(b, cb) in &nodes {
+                        for c in 0..3 {
+                            for e in 0..3 {
+                                t.push(Triplet::new(3 * a + c, 3 * b + e, -ca * cb * jw[(c, e)]));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        t
+    }
+}
+
+/// `H` as a faer linear operator on node-major 3m vectors.
+struct AdjointOperator<'a> {
+    sim: &'a Simulator,
+    lin: Linearization,
+    buffers: Mutex<(Vec<Vec3>, Vec<Vec3>)>,
+}
+
+impl std::fmt::Debug for AdjointOperator<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("AdjointOperator")
+    }
+}
+
+impl AdjointOperator<'_> {
+    fn apply_nodes(&self, v: &[Vec3], out: &mut [Vec3]) {
+        self.sim.factor().mul_xyz(v, out);
+        self.lin.sub_dp(self.sim, v, out);
+    }
+}
+
+impl LinOp<f64> for AdjointOperator<'_> {
+    fn apply_scratch(&self, _rhs_ncols: usize, _par: Par) -> StackReq {
+        StackReq::EMPTY
+    }
+    fn nrows(&self) -> usize {
+        3 * self.sim.num_nodes()
+    }
+    fn ncols(&self) -> usize {
+        3 * self.sim.num_nodes()
+    }
+    fn apply(&self, mut out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, _par: Par, _stack: &mut MemStack) {
+        let mut guard = self.buffers.lock().expect("operator buffers");
+        let (v, hv) = &mut *guard;
+        for k in 0..rhs.ncols() {
+            for (i, vi) in v.iter_mut().enumerate() {
+                *vi = Vec3::new(rhs[(3 * i, k)], rhs[(3 * i + 1, k)], rhs[(3 * i + 2, k)]);
+            }
+            self.apply_nodes(v, hv);
+            for (i, h) in hv.iter().enumerate() {
+                for d in 0..3 {
+                    out[(3 * i + d, k)] = h[d];
+                }
+            }
+        }
+    }
+    fn conj_apply(&self, out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, par: Par, stack: &mut MemStack) {
+        self.apply(out, rhs, par, stack);
+    }
+}
+
+/// `P^{-1}` (the PD factorization, per coordinate) as a faer preconditioner.
+struct PdPreconditioner<'a> {
+    factor: &'a SpdFactor,
+}
+
+impl std::fmt::Debug for PdPreconditioner<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("PdPreconditioner")
+    }
+}
+
+impl LinOp<f64> for PdPreconditioner<'_> {
+    fn apply_scratch(&self, _rhs_ncols: usize, _par: Par) -> StackReq {
+        self.factor.solve_scratch()
+    }
+    fn nrows(&self) -> usize {
+        3 * self.factor.dim()
+    }
+    fn ncols(&self) -> usize {
+        3 * self.factor.dim()
+    }
+    fn apply(&self, mut out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, _par: Par, stack: &mut MemStack) {
+        let n = self.factor.dim();
+        for k in 0..rhs.ncols() {
+            let mut cols = Mat::<f64>::zeros(n, 3);
+            for i in 0..n {
+                for d in 0..3 {
+                    cols[(i, d)] = rhs[(3 * i + d, k)];
+                }
+            }
+            self.factor.solve_columns(cols.as_mut(), stack);
+            for i in 0..n {
+                for d in 0..3 {
+                    out[(3 * i + d, k)] = cols[(i, d)];
+                }
+            }
+        }
+    }
+    fn conj_apply(&self, out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, par: Par, stack: &mut MemStack) {
+        self.apply(out, rhs, par, stack);
+    }
+}
+
+impl Precond<f64> for PdPreconditioner<'_> {}
+
+fn norm(v: &[Vec3]) -> f64 {
+    v.iter().map(|x| x.norm_squared()).sum::<f64>().sqrt()
+}
+
+impl Simulator {
+    /// Backpropagates a loss through the recorded steps. `dl_dx[n]` and `dl_dv[n]` are the
+    /// loss gradients with respect to the positions and velocities after recorded step n
+    /// (empty slices mean zero). Requires a tape (`set_recording(true)` before the rollout).
+    pub fn backward(&self, dl_dx: &[Vec<Vec3>], dl_dv: &[Vec<Vec3>], options: &BackwardOptions) -> Result<Gradients> {
+        let start_all = Instant::now();
+        let tape = self.tape().ok_or_else(|| Error::Input("no tape: call set_recording(true) before the rollout".into()))?;
+        let steps = tape.records.len();
+        let n = self.num_nodes();
+        for (name, g) in [("dl_dx", dl_dx), ("dl_dv", dl_dv)] {
+            if !g.is_empty() && g.len() != steps {
+                return Err(Error::Input(format!("{name} must have one entry per recorded step ({steps}), got {}", g.len())));
+            }
+            for (k, a) in g.iter().enumerate() {
+                if a.len() != n || !a.iter().all(|p| p.iter().all(|c| c.is_finite())) {
+                    return Err(Error::Input(format!("{name}[{k}] must be {n} finite rows")));
+                }
+            }
+        }
+        if !(options.tolerance > 0.0 && options.tolerance.is_finite()) || options.max_iterations == 0 {
+            return Err(Error::Param("backward tolerance must be positive and max_iterations at least 1".into()));
+        }
+        if let Some((k, _)) =
+            tape.records.iter().enumerate().find(|(_, r)| r.contacts.iter().any(|c| c.branch != Branch::TakeOff))
+        {
+            return Err(Error::Unsupported(format!(
+                "recorded step {k} has active contacts; gradients through contact are not implemented yet"
+            )));
+        }
+        let h = self.params().h;
+        let mass = self.masses();
+        let mut grads = Gradients {
+            attachment_targets: vec![Vec::new(); steps],
+            external_forces: vec![Vec::new(); steps],
+            steps: vec![AdjointStepStats::default(); steps],
+            ..Default::default()
+        };
+        let mut carry_x = vec![Vec3::zeros(); n];
+        let mut carry_v = vec![Vec3::zeros(); n];
+        let mut rhs = vec![Vec3::zeros(); n];
+        let mut z = vec![Vec3::zeros(); n];
+        let mut op = AdjointOperator {
+            sim: self,
+            lin: Linearization::new(self),
+            buffers: Mutex::new((vec![Vec3::zeros(); n], vec![Vec3::zeros(); n])),
+        };
+        let mut scratch = MemBuffer::new(StackReq::any_of(&[
+            bicgstab_scratch(IdentityPrecond { dim: 3 * n }, PdPreconditioner { factor: self.factor() }, &op, 1, Par::Seq),
+            self.factor().solve_scratch(),
+        ]));
+        for k in (0..steps).rev() {
+            let rec = &tape.records[k];
+            // The loss gradient on this step's output plus what later steps sent back.
+            let mut a_v = vec![Vec3::zeros(); n];
+            for i in 0..n {
+                let ax = carry_x[i] + dl_dx.get(k).map_or(Vec3::zeros(), |g| g[i]);
+                a_v[i] = carry_v[i] + dl_dv.get(k).map_or(Vec3::zeros(), |g| g[i]);
+                rhs[i] = ax + a_v[i] / h;
+            }
+            let t_dp = Instant::now();
+            op.lin.update(self, &rec.x_next);
+            grads.profile.dp += t_dp.elapsed();
+            let t_solve = Instant::now();
+            grads.steps[k] = self.solve_adjoint(&op, &rhs, &mut z, options, &mut scratch)?;
+            grads.profile.solve += t_solve.elapsed();
+            self.accumulate(rec, &z, &mut grads, k);
+            for i in 0..n {
+                carry_x[i] = mass[i] / (h * h) * z[i] - a_v[i] / h;
+                carry_v[i] = mass[i] / h * z[i];
+            }
+        }
+        grads.x0 = carry_x;
+        grads.v0 = carry_v;
+        let p = &mut grads.profile;
+        p.other = start_all.elapsed().saturating_sub(p.dp + p.dr + p.solve);
+        Ok(grads)
+    }
+
+    /// Solves `H z = g` with the chosen solver; an iterative solver that stalls, diverges or
+    /// hits its cap falls back to the direct solve (counted in the stats).
+    fn solve_adjoint(
+        &self,
+        op: &AdjointOperator<'_>,
+        g: &[Vec3],
+        z: &mut [Vec3],
+        options: &BackwardOptions,
+        scratch: &mut MemBuffer,
+    ) -> Result<AdjointStepStats> {
+        let g_norm = norm(g);
+        if g_norm == 0.0 {
+            z.iter_mut().for_each(|v| *v = Vec3::zeros());
+            return Ok(AdjointStepStats::default());
+        }
+        let residual_of = |z: &[Vec3]| {
+            let mut hz = vec![Vec3::zeros(); z.len()];
+            op.apply_nodes(z, &mut hz);
+            norm(&hz.iter().zip(g).map(|(a, b)| b - a).collect::<Vec<_>>()) / g_norm
+        };
+        let iterative = match options.solver {
+            AdjointSolver::Direct => None,
+            AdjointSolver::FixedPoint => Some(self.fixed_point(op, g, z, options, scratch)),
+            AdjointSolver::Krylov => Some(self.krylov(op, g, z, options, scratch)),
+        };
+        if let Some(Some(iterations)) = iterative {
+            let residual = residual_of(z);
+            if residual <= options.tolerance * 10.0 && z.iter().all(|v| v.iter().all(|c| c.is_finite())) {
+                return Ok(AdjointStepStats { iterations, fell_back: false, residual });
+            }
+        }
+        self.direct(op, g, z)?;
+        Ok(AdjointStepStats {
+            iterations: match iterative {
+                Some(Some(i)) => i,
+                _ => 0,
+            },
+            fell_back: iterative.is_some(),
+            residual: residual_of(z),
+        })
+    }
+
+    /// Paper Eqn. 30. Returns the iteration count, or None on stall/divergence/cap.
+    fn fixed_point(&self, op: &AdjointOperator<'_>, g: &[Vec3], z: &mut [Vec3], options: &BackwardOptions, scratch: &mut MemBuffer) -> Option<usize> {
+        let n = g.len();
+        let mut rhs = g.to_vec();
+        let mut dpz = vec![Vec3::zeros(); n];
+        z.iter_mut().for_each(|v| *v = Vec3::zeros());
+        let mut previous = f64::INFINITY;
+        let mut growing = 0;
+        for it in 1..=options.max_iterations {
+            // z <- P^{-1} (g + dP z): dP z = P z - H z.
+            dpz.iter_mut().for_each(|v| *v = Vec3::zeros());
+            op.lin.sub_dp(self, z, &mut dpz);
+            for i in 0..n {
+                rhs[i] = g[i] - dpz[i];
+            }
+            self.factor().solve_nodes(&mut rhs, MemStack::new(scratch));
+            let change = norm(&rhs.iter().zip(z.iter()).map(|(a, b)| a - b).collect::<Vec<_>>());
+            z.copy_from_slice(&rhs);
+            // Relative update (the paper's stopping rule); solve_adjoint checks the residual.
+            let residual = change / norm(z).max(f64::MIN_POSITIVE);
+            if !residual.is_finite() {
+                return None;
+            }
+            if residual <= options.tolerance {
+                return Some(it);
+            }
+            growing = if residual > previous { growing + 1 } else { 0 };
+            if growing >= 5 {
+                return None;
+            }
+            previous = residual;
+        }
+        None
+    }
+
+    fn krylov(&self, op: &AdjointOperator<'_>, g: &[Vec3], z: &mut [Vec3], options: &BackwardOptions, scratch: &mut MemBuffer) -> Option<usize> {
+        let n = g.len();
+        let mut rhs = Mat::<f64>::zeros(3 * n, 1);
+        for i in 0..n {
+            for d in 0..3 {
+                rhs[(3 * i + d, 0)] = g[i][d];
+            }
+        }
+        let mut out = Mat::<f64>::zeros(3 * n, 1);
+        let mut params = BicgParams::<f64>::default();
+        // faer 0.24's BiCGStab leaves its residual vector uninitialized for
+        // `InitialGuessStatus::Zero`; a zero guess declared `MaybeNonZero` computes r = g - H 0.
+        params.initial_guess = InitialGuessStatus::MaybeNonZero;
+        params.rel_tolerance = options.tolerance;
+        params.max_iters = options.max_iterations;
+        // Right preconditioning by P: H P^{-1} is close to the identity (dP is small next to P).
+        let result = bicgstab(
+            out.as_mut(),
+            IdentityPrecond { dim: 3 * n },
+            PdPreconditioner { factor: self.factor() },
+            op,
+            rhs.as_ref(),
+            params,
+            |_| {},
+            Par::Seq,
+            MemStack::new(scratch),
+        );
+        for i in 0..n {
+            z[i] = Vec3::new(out[(3 * i, 0)], out[(3 * i + 1, 0)], out[(3 * i + 2, 0)]);
+        }
+        result.ok().map(|info| info.iter_count)
+    }
+
+    fn direct(&self, op: &AdjointOperator<'_>, g: &[Vec3], z: &mut [Vec3]) -> Result<()> {
+        let n = g.len();
+        let triplets = op.lin.assemble(self, self.factor().matrix());
+        let h = SparseColMat::<usize, f64>::try_new_from_triplets(3 * n, 3 * n, &triplets)
+            .map_err(|e| Error::Solver(format!("cannot assemble the adjoint matrix: {e:?}")))?;
+        let lu = h.sp_lu().map_err(|e| Error::Solver(format!("adjoint matrix is singular: {e:?}")))?;
+        let mut rhs = Mat::<f64>::zeros(3 * n, 1);
+        for i in 0..n {
+            for d in 0..3 {
+                rhs[(3 * i + d, 0)] = g[i][d];
+            }
+        }
+        lu.solve_in_place(rhs.as_mut());
+        for i in 0..n {
+            z[i] = Vec3::new(rhs[(3 * i, 0)], rhs[(3 * i + 1, 0)], rhs[(3 * i + 2, 0)]);
+        }
+        Ok(())
+    }
+
+    /// Adds step k's contributions `-z . dg/dtheta` and the per-step action/force gradients.
+    fn accumulate(&self, rec: &StepRecord, z: &[Vec3], grads: &mut Gradients, k: usize) {
+        let p = self.params();
+        let h = p.h;
+        let x = &rec.x_next;
+        let effects = self.effects();
+        if effects.external_forces {
+            grads.external_forces[k] = z.to_vec();
+        }
+        if let Some(nodes) = (!self.attachment_nodes().is_empty()).then(|| self.attachment_nodes()) {
+            grads.attachment_targets[k] = nodes.iter().map(|&j| p.k_attach * z[j]).collect();
+            grads.k_attach -= nodes.iter().zip(&rec.targets).map(|(&j, t)| z[j].dot(&(x[j] - t))).sum::<f64>();
+        }
+        if let Some(s) = self.stretch() {
+            let (lo, hi) = s.strain_limits();
+            let mut dot = 0.0;
+            for (t, tri) in s.triangles().iter().enumerate() {
+                let f = s.deformation_gradient(t, x);
+                let r = (f - crate::energy::project_singular_values(&f, lo, hi)) * s.rest_area(t);
+                for l in 0..3 {
+                    dot += z[tri[l]].dot(&(r * s.shape(t)[l]));
+                }
+            }
+            grads.k_stretch -= dot;
+        }
+        if let Some(b) = self.bend() {
+            let mut dot = 0.0;
+            for (i, &center) in b.centers().iter().enumerate() {
+                let r = (b.curvature(i, x) - b.projection(i, x)) * b.area(i);
+                let (nbrs, coefs) = b.stencil(i);
+                for (&j, &c) in nbrs.iter().zip(coefs) {
+                    dot += c * (z[j] - z[center]).dot(&r);
+                }
+            }
+            grads.k_bend -= dot;
+        }
+        let area = self.node_areas();
+        let mass = self.masses();
+        for i in 0..x.len() {
+            let mut dg = area[i] * (x[i] - rec.x_prev[i] - h * rec.v_prev[i]) / (h * h);
+            if effects.gravity {
+                dg -= area[i] * p.gravity;
+                grads.gravity += mass[i] * z[i];
+            }
+            grads.density -= z[i].dot(&dg);
+        }
+        if let Some(w) = self.wind() {
+            let s = w.modulation(rec.time);
+            let ds = 0.5 * (w.omega * rec.time + w.phi).cos();
+            let kz: Vec3 = z.iter().zip(w.coefficient()).map(|(zi, k)| *k * zi).sum();
+            grads.wind_direction += s * kz;
+            grads.wind_omega += ds * rec.time * kz.dot(&w.direction);
+            grads.wind_phi += ds * kz.dot(&w.direction);
+        }
+    }
+}
+

@@ -1,0 +1,205 @@
+//! Analytic gradients against central finite differences of the whole rollout.
+use crate::common::*;
+use diffcloth::{AdjointSolver, BackwardOptions, Effect, Params, Simulator, StepInput, Vec3};
+
+/// Inputs of a rollout that the gradients are taken with respect to.
+#[derive(Clone)]
+struct Rollout {
+    x0: Vec<Vec3>,
+    v0: Vec<Vec3>,
+    targets: Vec<Vec<Vec3>>,
+    forces: Vec<Vec<Vec3>>,
+    params: Params,
+}
+
+/// Loss weights: L = sum_n a_n . x_n + b_n . v_n (linear, so FD truncation error is small).
+struct Loss {
+    a: Vec<Vec<Vec3>>,
+    b: Vec<Vec<Vec3>>,
+}
+
+fn run(sim: &mut Simulator, r: &Rollout, loss: &Loss, record: bool) -> f64 {
+    sim.set_params(r.params.clone()).unwrap();
+    sim.set_recording(record);
+    sim.reset(Some(&r.x0), Some(&r.v0)).unwrap();
+    let mut total = 0.0;
+    for n in 0..r.targets.len() {
+        let input = StepInput {
+            attachment_targets: (!r.targets[n].is_empty()).then_some(&r.targets[n][..]),
+            external_forces: (!r.forces[n].is_empty()).then_some(&r.forces[n][..]),
+        };
+        let stats = sim.step(input).unwrap();
+        assert!(stats.residual < 1e-11, "forward must converge for the check: {stats:?}");
+        total += sim.positions().iter().zip(&loss.a[n]).map(|(x, a)| x.dot(a)).sum::<f64>();
+        total += sim.velocities().iter().zip(&loss.b[n]).map(|(v, b)| v.dot(b)).sum::<f64>();
+    }
+    total
+}
+
+fn dot(a: &[Vec3], b: &[Vec3]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x.dot(y)).sum()
+}
+
+fn check(name: &str, analytic: f64, fd: f64) {
+    let err = (analytic - fd).abs() / fd.abs().max(analytic.abs()).max(1e-8);
+    assert!(err < 1e-5, "{name}: analytic {analytic:.10e} vs fd {fd:.10e} (rel {err:.1e})");
+}
+
+/// Checks every gradient group by a directional central difference.
+fn check_all_gradients(sim: &mut Simulator, base: &Rollout, steps: usize, solvers: &[AdjointSolver], eps_factor: f64) {
+    let n = sim.num_nodes();
+    let loss = Loss {
+        a: (0..steps).map(|k| random_vectors(n, 1.0, 100 + k as u64)).collect(),
+        b: (0..steps).map(|k| random_vectors(n, 0.1, 200 + k as u64)).collect(),
+    };
+    run(sim, base, &loss, true);
+    let mut reference = None;
+    for &solver in solvers {
+        let g = sim
+            .backward(&loss.a, &loss.b, &BackwardOptions { solver, tolerance: 1e-10, max_iterations: 2000 })
+            .unwrap();
+        assert!(g.steps.iter().all(|s| !s.fell_back), "{solver:?} fell back: {:?}", g.steps);
+        match &reference {
+            None => reference = Some(g),
+            Some(r) => {
+                let rel = |a: &[Vec3], b: &[Vec3]| {
+                    a.iter().zip(b).map(|(x, y)| (x - y).norm_squared()).sum::<f64>().sqrt()
+                        / b.iter().map(|y| y.norm_squared()).sum::<f64>().sqrt()
+                };
+                assert!(rel(&g.v0, &r.v0) < 1e-6, "{solver:?} vs first solver: {}", rel(&g.v0, &r.v0));
+                assert!(rel(&g.x0, &r.x0) < 1e-6);
+            }
+        }
+    }
+    let g = reference.unwrap();
+    let effects = sim.effects();
+    // Step sizes: large enough that the forward solve's remaining error (the FD noise floor)
+    // is negligible, small enough that curvature does not matter (checked by sweeping eps).
+    let mut fd = |eps: f64, perturb: &dyn Fn(&mut Rollout, f64)| {
+        let eps = eps * eps_factor;
+        let (mut p, mut m) = (base.clone(), base.clone());
+        perturb(&mut p, eps);
+        perturb(&mut m, -eps);
+        (run(sim, &p, &loss, false) - run(sim, &m, &loss, false)) / (2.0 * eps)
+    };
+    let dx = random_vectors(n, 1.0, 7);
+    check("x0", dot(&g.x0, &dx), fd(1e-5, &|r, e| r.x0.iter_mut().zip(&dx).for_each(|(x, d)| *x += e * d)));
+    check("v0", dot(&g.v0, &dx), fd(1e-3, &|r, e| r.v0.iter_mut().zip(&dx).for_each(|(v, d)| *v += e * d)));
+    if !base.targets[0].is_empty() {
+        let dt: Vec<Vec<Vec3>> = (0..steps).map(|k| random_vectors(base.targets[0].len(), 1.0, 300 + k as u64)).collect();
+        let analytic: f64 = (0..steps).map(|k| dot(&g.attachment_targets[k], &dt[k])).sum();
+        check("attachment targets", analytic, fd(1e-4, &|r, e| {
+            for (t, d) in r.targets.iter_mut().zip(&dt) {
+                t.iter_mut().zip(d).for_each(|(x, dd)| *x += e * dd);
+            }
+        }));
+        let ka = base.params.k_attach;
+        check("k_attach", g.k_attach * ka, fd(1e-4, &|r, e| r.params.k_attach += e * ka));
+    }
+    if !base.forces[0].is_empty() {
+        let df: Vec<Vec<Vec3>> = (0..steps).map(|k| random_vectors(n, 1.0, 400 + k as u64)).collect();
+        let analytic: f64 = (0..steps).map(|k| dot(&g.external_forces[k], &df[k])).sum();
+        check("external forces", analytic, fd(1e-3, &|r, e| {
+            for (f, d) in r.forces.iter_mut().zip(&df) {
+                f.iter_mut().zip(d).for_each(|(x, dd)| *x += e * dd);
+            }
+        }));
+    }
+    let scale = |v: f64| v.abs().max(1.0);
+    let (ks, kb, rho) = (scale(base.params.k_stretch), scale(base.params.k_bend), base.params.density);
+    check("k_stretch", g.k_stretch * ks, fd(1e-4, &|r, e| r.params.k_stretch += e * ks));
+    if effects.bend {
+        check("k_bend", g.k_bend * kb, fd(1e-4, &|r, e| r.params.k_bend += e * kb));
+    }
+    check("density", g.density * rho, fd(1e-4, &|r, e| r.params.density += e * rho));
+    if effects.gravity {
+        let dg = Vec3::new(0.3, -1.0, 0.2);
+        check("gravity", g.gravity.dot(&dg), fd(1e-3, &|r, e| r.params.gravity += e * dg));
+    }
+    if effects.wind {
+        let dd = Vec3::new(0.5, 0.1, -0.7);
+        let om = scale(base.params.wind_omega);
+        check("wind direction", g.wind_direction.dot(&dd), fd(1e-3, &|r, e| r.params.wind_direction += e * dd));
+        check("wind omega", g.wind_omega * om, fd(1e-4, &|r, e| r.params.wind_omega += e * om));
+        check("wind phi", g.wind_phi, fd(1e-3, &|r, e| r.params.wind_phi += e));
+    }
+}
+
+#[test]
+fn gradients_match_finite_differences_without_contact() {
+    let mut sim = sim_from_toml(
+        r#"
+h = 0.01
+effects = ["gravity", "stretch", "bend", "attachments", "wind", "external_forces"]
+[mesh]
+kind = "grid"
+rows = 5
+cols = 5
+width = 1.0
+height = 1.0
+plane = "xy"
+[material]
+density = 0.2
+k_stretch = 80.0
+k_bend = 0.02
+strain_limits = [1.0, 1.0]
+[attachments]
+stiffness = 500.0
+select = "top_corners"
+[wind]
+direction = [0.1, 0.0, 0.4]
+omega = 5.0
+phi = 0.3
+[solver]
+tolerance = 1e-13
+max_iterations = 20000
+"#,
+    );
+    let steps = 12;
+    let n = sim.num_nodes();
+    let t0 = sim.attachment_targets().to_vec();
+    let base = Rollout {
+        x0: sim.positions().iter().zip(random_vectors(n, 0.02, 1)).map(|(x, d)| x + d).collect(),
+        v0: random_vectors(n, 0.5, 2),
+        targets: (0..steps).map(|k| t0.iter().map(|t| t + Vec3::new(0.01, 0.02, 0.03) * k as f64).collect()).collect(),
+        forces: (0..steps).map(|k| random_vectors(n, 0.01, 50 + k as u64)).collect(),
+        params: sim.params().clone(),
+    };
+    check_all_gradients(&mut sim, &base, steps, &[AdjointSolver::Direct, AdjointSolver::Krylov, AdjointSolver::FixedPoint], 1.0);
+}
+
+/// The hat's curved rest shape makes the bending projection Jacobian non-zero.
+#[test]
+fn gradients_match_finite_differences_on_the_hat() {
+    let mut cfg = load_config("hat");
+    cfg.effects.retain(|e| !matches!(e, Effect::ObstacleContact | Effect::Friction | Effect::SelfCollision));
+    cfg.obstacles.clear();
+    cfg.self_collision = None;
+    cfg.contact = None;
+    // A fixed iteration count (no stopping test): the solution is then a smooth function of
+    // the inputs, which keeps the finite differences free of stopping-rule noise.
+    cfg.solver.tolerance = 0.0;
+    cfg.solver.max_iterations = 600;
+    let mut sim = Simulator::new(&cfg).unwrap();
+    let steps = 6;
+    let n = sim.num_nodes();
+    let t0 = sim.attachment_targets().to_vec();
+    let base = Rollout {
+        x0: sim.positions().to_vec(),
+        v0: random_vectors(n, 0.3, 5),
+        targets: (0..steps).map(|k| t0.iter().map(|t| t + Vec3::new(0.0, 0.02, 0.0) * k as f64).collect()).collect(),
+        forces: vec![Vec::new(); steps],
+        params: sim.params().clone(),
+    };
+    check_all_gradients(&mut sim, &base, steps, &[AdjointSolver::Direct, AdjointSolver::Krylov], 1.0);
+}
+
+#[test]
+fn backward_without_a_tape_or_through_contact_is_an_error() {
+    let mut sim = Simulator::from_toml_file(&configs_dir().join("slope.toml")).unwrap();
+    assert!(sim.backward(&[], &[], &BackwardOptions::default()).unwrap_err().to_string().contains("tape"));
+    sim.set_recording(true);
+    sim.step(StepInput::default()).unwrap();
+    let err = sim.backward(&[], &[], &BackwardOptions::default()).unwrap_err();
+    assert!(err.to_string().contains("contact"), "{err}");
+}
