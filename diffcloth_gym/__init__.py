@@ -18,6 +18,7 @@ from diffcloth_gym.errors import (
     MeshError,
     ParameterError,
     SolverError,
+    UnsupportedError,
 )
 from diffcloth_gym.simulator import CONFIG_DIR, Simulator
 
@@ -32,4 +33,5 @@ __all__ = [
     "ParameterError",
     "Simulator",
     "SolverError",
+    "UnsupportedError",
 ]

@@ -33,5 +33,9 @@ class DivergedError(SolverError):
     """The state became non-finite; the step was rolled back, the simulator stays usable."""
 
 
+class UnsupportedError(DiffClothError, NotImplementedError):
+    """The request is valid but not supported yet (the message says what)."""
+
+
 class InternalError(DiffClothError, RuntimeError):
     """A bug inside the simulator (a Rust panic caught at the boundary). Please report it."""

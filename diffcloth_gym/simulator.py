@@ -168,6 +168,48 @@ class Simulator:
         """Changes solver settings by name (see :meth:`solver`)."""
         self._core.set_solver(**settings)
 
+    # -- gradients -----------------------------------------------------------------------
+    def set_recording(self, on: bool = True) -> None:
+        """Starts recording steps on a tape for :meth:`backward` (clearing any previous tape),
+        or stops. :meth:`reset` also clears the tape."""
+        self._core.set_recording(bool(on))
+
+    def tape_info(self) -> tuple[int, int]:
+        """``(recorded steps, bytes held by the tape)``."""
+        return self._core.tape_info()
+
+    def backward(self, dl_dx: Any = None, dl_dv: Any = None, solver: str = "krylov",
+                 tolerance: float = 1e-10, max_iterations: int = 500) -> dict:
+        """Adjoint gradients of a loss through the recorded steps.
+
+        ``dl_dx`` and ``dl_dv``: (N, n, 3) gradients of the loss with respect to the positions
+        and velocities after each of the N recorded steps (``None`` for zero). ``solver``:
+        ``"krylov"`` (BiCGStab preconditioned by the PD factorization; default), ``"direct"``
+        (sparse LU) or ``"fixed_point"`` (the paper's Eqn. 30); iterative solves that stall fall
+        back to ``"direct"`` and are counted in ``fell_back``.
+
+        Returns numpy arrays ``x0``, ``v0`` (n, 3); per step lists ``attachment_targets`` and
+        ``external_forces``; scalars ``k_stretch``, ``k_bend``, ``k_attach``, ``density``,
+        ``wind_omega``, ``wind_phi``; 3-lists ``gravity``, ``wind_direction``; per-step solver
+        stats ``iterations``, ``fell_back``, ``residual``; and a stage ``profile``.
+        Gradients are never clipped or rescaled.
+        """
+        steps, _ = self.tape_info()
+        def grads(name, a):
+            if a is None:
+                return None
+            try:
+                arr = np.ascontiguousarray(a, dtype=np.float64)
+            except (TypeError, ValueError) as e:
+                raise InputError(f"{name} must be an (N, n, 3) array: {e}") from None
+            if arr.shape != (steps, self.num_nodes, 3):
+                raise InputError(f"{name} must have shape ({steps}, {self.num_nodes}, 3), got {arr.shape}")
+            return arr
+        out = self._core.backward(grads("dl_dx", dl_dx), grads("dl_dv", dl_dv), solver, float(tolerance), int(max_iterations))
+        out["attachment_targets"] = [np.asarray(a) for a in out["attachment_targets"]]
+        out["external_forces"] = [np.asarray(a) for a in out["external_forces"]]
+        return out
+
     # -- diagnostics ---------------------------------------------------------------------
     def profile(self) -> dict:
         """Wall time per stage in seconds (``local_s``, ``global_s``, ``detection_s``,

@@ -1,7 +1,7 @@
 //! Thin Python binding (`diffcloth_gym._core`): converts arrays, maps errors to the exception
 //! tree in `diffcloth_gym.errors`, releases the GIL for long calls. No physics here.
 
-use diffcloth::{Branch, ContactKind, Error, Params, SceneConfig, Simulator, SolverSettings, StepInput, StepStats, Vec3};
+use diffcloth::{AdjointSolver, BackwardOptions, Branch, ContactKind, Error, Params, SceneConfig, Simulator, SolverSettings, StepInput, StepStats, Vec3};
 use numpy::{PyArray2, PyReadonlyArray2, ToPyArray};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -18,6 +18,7 @@ fn to_py_err(py: Python<'_>, err: Error) -> PyErr {
         Error::Param(_) => "ParameterError",
         Error::Solver(_) => "SolverError",
         Error::Diverged(_) => "DivergedError",
+        Error::Unsupported(_) => "UnsupportedError",
         _ => "DiffClothError",
     };
     raise(py, class, err.to_string())
@@ -343,6 +344,71 @@ impl PySimulator {
             return Err(raise(py, "InputError", format!("obstacle {index} does not exist ({} obstacles)", obstacles.len())));
         };
         Ok(self.inner.positions().iter().map(|p| o.query(p, self.inner.time()).0).collect())
+    }
+
+    /// Starts (clearing the tape) or stops recording steps for backward().
+    fn set_recording(&mut self, on: bool) {
+        self.inner.set_recording(on);
+    }
+
+    /// (recorded steps, bytes held by the tape).
+    fn tape_info(&self) -> (usize, usize) {
+        self.inner.tape().map_or((0, 0), |t| (t.records.len(), t.bytes()))
+    }
+
+    /// Backpropagates dL/dx and dL/dv of every recorded step's output (arrays (N, n, 3) or
+    /// None) and returns the gradients as a dict.
+    #[pyo3(signature = (dl_dx=None, dl_dv=None, solver="krylov", tolerance=1e-10, max_iterations=500))]
+    fn backward<'py>(
+        &self,
+        py: Python<'py>,
+        dl_dx: Option<numpy::PyReadonlyArray3<'_, f64>>,
+        dl_dv: Option<numpy::PyReadonlyArray3<'_, f64>>,
+        solver: &str,
+        tolerance: f64,
+        max_iterations: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let solver = match solver {
+            "direct" => AdjointSolver::Direct,
+            "krylov" => AdjointSolver::Krylov,
+            "fixed_point" => AdjointSolver::FixedPoint,
+            other => {
+                return Err(raise(py, "ParameterError", format!("solver must be \"direct\", \"krylov\" or \"fixed_point\", got {other:?}")))
+            }
+        };
+        let read = |name: &str, a: Option<numpy::PyReadonlyArray3<'_, f64>>| -> PyResult<Vec<Vec<Vec3>>> {
+            let Some(a) = a else { return Ok(Vec::new()) };
+            let v = a.as_array();
+            if v.shape()[2] != 3 {
+                return Err(raise(py, "InputError", format!("{name} must have shape (steps, n, 3), got {:?}", v.shape())));
+            }
+            Ok(v.outer_iter().map(|step| step.outer_iter().map(|r| Vec3::new(r[0], r[1], r[2])).collect()).collect())
+        };
+        let (gx, gv) = (read("dl_dx", dl_dx)?, read("dl_dv", dl_dv)?);
+        let sim = &self.inner;
+        let options = BackwardOptions { solver, tolerance, max_iterations };
+        let g = guarded(py, || sim.backward(&gx, &gv, &options))?;
+        let d = PyDict::new(py);
+        d.set_item("x0", nodes_to_py(py, &g.x0))?;
+        d.set_item("v0", nodes_to_py(py, &g.v0))?;
+        let per_step = |rows: &Vec<Vec<Vec3>>| -> Vec<Bound<'py, PyArray2<f64>>> { rows.iter().map(|r| nodes_to_py(py, r)).collect() };
+        d.set_item("attachment_targets", per_step(&g.attachment_targets))?;
+        d.set_item("external_forces", per_step(&g.external_forces))?;
+        for (k, v) in [("k_stretch", g.k_stretch), ("k_bend", g.k_bend), ("k_attach", g.k_attach), ("density", g.density), ("wind_omega", g.wind_omega), ("wind_phi", g.wind_phi)] {
+            d.set_item(k, v)?;
+        }
+        d.set_item("gravity", g.gravity.as_slice().to_vec())?;
+        d.set_item("wind_direction", g.wind_direction.as_slice().to_vec())?;
+        d.set_item("iterations", g.steps.iter().map(|s| s.iterations).collect::<Vec<_>>())?;
+        d.set_item("fell_back", g.steps.iter().map(|s| s.fell_back).collect::<Vec<_>>())?;
+        d.set_item("residual", g.steps.iter().map(|s| s.residual).collect::<Vec<_>>())?;
+        let prof = PyDict::new(py);
+        prof.set_item("dp_s", g.profile.dp.as_secs_f64())?;
+        prof.set_item("dr_s", g.profile.dr.as_secs_f64())?;
+        prof.set_item("solve_s", g.profile.solve.as_secs_f64())?;
+        prof.set_item("other_s", g.profile.other.as_secs_f64())?;
+        d.set_item("profile", prof)?;
+        Ok(d)
     }
 
     /// Kinetic + gravitational + elastic energy of the current state.
