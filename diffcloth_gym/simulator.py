@@ -190,7 +190,8 @@ class Simulator:
 
         Returns numpy arrays ``x0``, ``v0`` (n, 3); per step lists ``attachment_targets`` and
         ``external_forces``; scalars ``k_stretch``, ``k_bend``, ``k_attach``, ``density``,
-        ``wind_omega``, ``wind_phi``; 3-lists ``gravity``, ``wind_direction``; per-step solver
+        ``wind_omega``, ``wind_phi``, ``mu_self``; ``mu_obstacles`` (one per obstacle); 3-lists
+        ``gravity``, ``wind_direction``; per-step solver
         stats ``iterations``, ``fell_back``, ``residual``; and a stage ``profile``.
         Gradients are never clipped or rescaled.
         """
@@ -209,6 +210,14 @@ class Simulator:
         out["attachment_targets"] = [np.asarray(a) for a in out["attachment_targets"]]
         out["external_forces"] = [np.asarray(a) for a in out["external_forces"]]
         return out
+
+    def set_obstacle_mu(self, index: int, mu: float) -> None:
+        """Sets the Coulomb friction coefficient of obstacle ``index``."""
+        self._core.set_obstacle_mu(int(index), float(mu))
+
+    def set_self_mu(self, mu: float) -> None:
+        """Sets the self-contact friction coefficient."""
+        self._core.set_self_mu(float(mu))
 
     # -- diagnostics ---------------------------------------------------------------------
     def profile(self) -> dict:

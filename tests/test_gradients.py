@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from diffcloth_gym import InputError, Simulator, UnsupportedError
+from diffcloth_gym import InputError, Simulator
 
 CFG = {
     "h": 0.01,
@@ -67,8 +67,28 @@ def test_backward_errors():
         sim.backward(dl_dx=np.zeros((3, sim.num_nodes, 3)))
     with pytest.raises(ValueError, match="solver"):
         sim.backward(solver="magic")
+    with pytest.raises(ValueError, match="obstacle 0"):
+        sim.set_obstacle_mu(0, 0.5)  # this scene has no obstacle
+
+
+def test_backward_through_sliding_contact_gives_the_friction_gradient():
+    """Slope: every node slips; more friction slows the ribbon, so d(downhill travel)/d(mu) < 0."""
     slope = Simulator.from_config("slope")
     slope.set_recording(True)
-    slope.step()
-    with pytest.raises(UnsupportedError, match="contact"):
-        slope.backward()
+    steps = 20
+    slope.step(steps=steps)
+    n = slope.num_nodes
+    downhill = np.array([0.0, -np.sin(np.radians(42)), np.cos(np.radians(42))])
+    dl_dx = np.zeros((steps, n, 3))
+    dl_dx[-1] = downhill / n  # loss: mean downhill position at the end
+    g = slope.backward(dl_dx=dl_dx)
+    assert len(g["mu_obstacles"]) == 1 and g["mu_obstacles"][0] < 0
+    assert np.isfinite(g["v0"]).all() and not any(g["fell_back"])
+    # Against a finite difference in mu.
+    def travel(mu):
+        s = Simulator.from_config("slope")
+        s.set_obstacle_mu(0, mu)
+        s.step(steps=steps)
+        return float(np.mean(s.positions @ downhill))
+    fd = (travel(0.5 + 1e-4) - travel(0.5 - 1e-4)) / 2e-4
+    assert abs(g["mu_obstacles"][0] - fd) <= 1e-5 * abs(fd)

@@ -346,6 +346,18 @@ impl PySimulator {
         Ok(self.inner.positions().iter().map(|p| o.query(p, self.inner.time()).0).collect())
     }
 
+    /// Sets the friction coefficient of obstacle `index`.
+    fn set_obstacle_mu(&mut self, py: Python<'_>, index: usize, mu: f64) -> PyResult<()> {
+        let sim = &mut self.inner;
+        guarded(py, || sim.set_obstacle_mu(index, mu))
+    }
+
+    /// Sets the self-contact friction coefficient.
+    fn set_self_mu(&mut self, py: Python<'_>, mu: f64) -> PyResult<()> {
+        let sim = &mut self.inner;
+        guarded(py, || sim.set_self_mu(mu))
+    }
+
     /// Starts (clearing the tape) or stops recording steps for backward().
     fn set_recording(&mut self, on: bool) {
         self.inner.set_recording(on);
@@ -397,6 +409,8 @@ impl PySimulator {
         for (k, v) in [("k_stretch", g.k_stretch), ("k_bend", g.k_bend), ("k_attach", g.k_attach), ("density", g.density), ("wind_omega", g.wind_omega), ("wind_phi", g.wind_phi)] {
             d.set_item(k, v)?;
         }
+        d.set_item("mu_obstacles", g.mu_obstacles.clone())?;
+        d.set_item("mu_self", g.mu_self)?;
         d.set_item("gravity", g.gravity.as_slice().to_vec())?;
         d.set_item("wind_direction", g.wind_direction.as_slice().to_vec())?;
         d.set_item("iterations", g.steps.iter().map(|s| s.iterations).collect::<Vec<_>>())?;

@@ -7,7 +7,7 @@
 //! `dL/dx_n = M z / h^2 - dL/dv_{n+1} / h`, `dL/dv_n = M z / h`, `dL/df_n = z`, and every
 //! parameter theta gets `-z . dg/dtheta`.
 
-use crate::contact::Branch;
+use crate::contact::{Branch, ContactKind};
 use crate::energy::{stretch_projection_jacobian as stretch_jacobian, Bend, Stretch};
 use crate::error::{Error, Result};
 use crate::forward::Simulator;
@@ -87,6 +87,9 @@ pub struct Gradients {
     pub wind_direction: Vec3,
     pub wind_omega: f64,
     pub wind_phi: f64,
+    /// Friction coefficient of each obstacle, and of self-contact.
+    pub mu_obstacles: Vec<f64>,
+    pub mu_self: f64,
     pub steps: Vec<AdjointStepStats>,
     pub profile: BackwardProfile,
 }
@@ -210,10 +213,119 @@ impl Linearization {
     }
 }
 
+/// One active contact linearized at the converged step (paper Sec. 4.2, Eqns. 19-28, in
+/// momentum form). The contact's free momentum is `d = sum_k s_k D_k - m v_obs` with
+/// `D = M v_n + h f + h (b(x) - K x)` per node, its impulse `J = Phi(d; n, gap, mu)` acts as
+/// the force `e_k J / h` on its nodes, so `dR/dx = sum_c E_c Phi' S_c (dP - K)`.
+struct ContactLin {
+    /// `(node, s_k)`: how the nodes' momenta combine into d.
+    s: Vec<(usize, f64)>,
+    /// `(node, e_k)`: where the impulse acts (+1 on the node / on a, -1 on b).
+    e: Vec<(usize, f64)>,
+    /// `dJ/dd`.
+    phi: Matrix3<f64>,
+    /// `dJ/dlambda` with `lambda = -(d.n + m gap / h)` the normal impulse.
+    dj_dlambda: Vec3,
+    /// `dJ/dn` (the frame's dependence on x_n) and `dJ/dmu`.
+    dj_dn: Matrix3<f64>,
+    dj_dmu: Vec3,
+    /// Per node of the frame: `(node, d gap/dx, dn/dx)`.
+    frame: Vec<(usize, Vec3, Matrix3<f64>)>,
+    mass: f64,
+    gap: f64,
+    obstacle: Option<usize>,
+    obstacle_velocity: Vec3,
+}
+
+impl ContactLin {
+    /// `E^T v / h`: the adjoint of the contact force.
+    fn impulse_adjoint(&self, v: &[Vec3], h: f64) -> Vec3 {
+        self.e.iter().map(|&(k, e)| e * v[k]).sum::<Vec3>() / h
+    }
+}
+
+/// Linearizes every active contact of a recorded step at its converged state.
+fn linearize_contacts(sim: &Simulator, rec: &StepRecord) -> Result<Vec<ContactLin>> {
+    let h = sim.params().h;
+    let mass = sim.masses();
+    let mut count = vec![0u8; sim.num_nodes()];
+    let mut out = Vec::new();
+    for c in rec.contacts.iter().filter(|c| c.branch != Branch::TakeOff) {
+        let velocity = |k: usize| (rec.x_next[k] - rec.x_prev[k]) / h;
+        let (s, e, frame, relative, obstacle) = match c.kind {
+            ContactKind::Obstacle { node, obstacle } => {
+                let o = &sim.obstacles()[obstacle];
+                let (offset, _) = o.motion.at(rec.time);
+                let jac = o.shape.normal_jacobian(&(rec.x_prev[node] - offset));
+                (
+                    vec![(node, 1.0)],
+                    vec![(node, 1.0)],
+                    vec![(node, c.normal, jac)],
+                    velocity(node) - c.obstacle_velocity,
+                    Some(obstacle),
+                )
+            }
+            ContactKind::SelfPair { a, b } => {
+                let dist = (rec.x_prev[a] - rec.x_prev[b]).norm();
+                let jac = (Matrix3::identity() - c.normal * c.normal.transpose()) / dist.max(f64::MIN_POSITIVE);
+                (
+                    vec![(a, c.mass / mass[a]), (b, -c.mass / mass[b])],
+                    vec![(a, 1.0), (b, -1.0)],
+                    vec![(a, c.normal, jac), (b, -c.normal, -jac)],
+                    velocity(a) - velocity(b),
+                    None,
+                )
+            }
+        };
+        for &(k, _) in &e {
+            count[k] += 1;
+            if count[k] > 1 {
+                return Err(Error::Unsupported(format!(
+                    "node {k} has several active contacts in one step; their joint linearization is not implemented yet"
+                )));
+            }
+        }
+        // The converged momentum balance m u = d + J gives back the free momentum d.
+        let (n, m, mu) = (c.normal, c.mass, c.mu);
+        let d = m * relative - c.impulse;
+        let lambda = -(d.dot(&n) + m * c.gap / h);
+        let (phi, dj_dlambda, dj_dn, dj_dmu) = match c.branch {
+            Branch::Stick => (-Matrix3::identity(), n, -(m * c.gap / h) * Matrix3::identity(), Vec3::zeros()),
+            Branch::Slip => {
+                let d_t = d - d.dot(&n) * n;
+                let t = d_t.norm().max(f64::MIN_POSITIVE);
+                let a = d_t / t;
+                let proj_a = Matrix3::identity() - a * a.transpose();
+                let proj_n = Matrix3::identity() - n * n.transpose();
+                let phi = -n * n.transpose() + mu * a * n.transpose() - (mu * lambda / t) * proj_a * proj_n;
+                let da_dn = proj_a * (-(n * d.transpose()) - d.dot(&n) * Matrix3::identity()) / t;
+                let dj_dn = (n - mu * a) * (-d.transpose()) + lambda * (Matrix3::identity() - mu * da_dn);
+                (phi, n - mu * a, dj_dn, -lambda * a)
+            }
+            Branch::TakeOff => unreachable!("filtered above"),
+        };
+        out.push(ContactLin {
+            s,
+            e,
+            phi,
+            dj_dlambda,
+            dj_dn,
+            dj_dmu,
+            frame,
+            mass: m,
+            gap: c.gap,
+            obstacle,
+            obstacle_velocity: c.obstacle_velocity,
+        });
+    }
+    Ok(out)
+}
+
 /// `H` as a faer linear operator on node-major 3m vectors.
 struct AdjointOperator<'a> {
     sim: &'a Simulator,
     lin: Linearization,
+    contacts: Vec<ContactLin>,
     buffers: Mutex<(Vec<Vec3>, Vec<Vec3>)>,
 }
 
@@ -224,9 +336,34 @@ impl std::fmt::Debug for AdjointOperator<'_> {
 }
 
 impl AdjointOperator<'_> {
+    /// `out = H^T v` with `H^T = P - dP - (dP - K) sum_c S_c^T Phi_c'^T E_c^T` (the adjoint
+    /// system is transposed: contact makes H non-symmetric).
     fn apply_nodes(&self, v: &[Vec3], out: &mut [Vec3]) {
         self.sim.factor().mul_xyz(v, out);
         self.lin.sub_dp(self.sim, v, out);
+        if self.contacts.is_empty() {
+            return;
+        }
+        let n = v.len();
+        let h = self.sim.params().h;
+        let mut u = vec![Vec3::zeros(); n];
+        for c in &self.contacts {
+            let w = c.phi.transpose() * (c.impulse_adjoint(v, h) * h);
+            for &(k, s) in &c.s {
+                u[k] += s * w;
+            }
+        }
+        // out -= (dP - K) u, with K u = P u - M u / h^2.
+        let mut t = vec![Vec3::zeros(); n];
+        self.lin.sub_dp(self.sim, &u, &mut t); // t = -dP u
+        let mut pu = vec![Vec3::zeros(); n];
+        self.sim.factor().mul_xyz(&u, &mut pu);
+        let mass = self.sim.masses();
+        for i in 0..n {
+            let ku = pu[i] - mass[i] / (h * h) * u[i];
+            // (dP - K) u = -t - K u
+            out[i] += t[i] + ku;
+        }
     }
 }
 
@@ -331,16 +468,10 @@ impl Simulator {
         if !(options.tolerance > 0.0 && options.tolerance.is_finite()) || options.max_iterations == 0 {
             return Err(Error::Param("backward tolerance must be positive and max_iterations at least 1".into()));
         }
-        if let Some((k, _)) =
-            tape.records.iter().enumerate().find(|(_, r)| r.contacts.iter().any(|c| c.branch != Branch::TakeOff))
-        {
-            return Err(Error::Unsupported(format!(
-                "recorded step {k} has active contacts; gradients through contact are not implemented yet"
-            )));
-        }
         let h = self.params().h;
         let mass = self.masses();
         let mut grads = Gradients {
+            mu_obstacles: vec![0.0; self.obstacles().len()],
             attachment_targets: vec![Vec::new(); steps],
             external_forces: vec![Vec::new(); steps],
             steps: vec![AdjointStepStats::default(); steps],
@@ -353,6 +484,7 @@ impl Simulator {
         let mut op = AdjointOperator {
             sim: self,
             lin: Linearization::new(self),
+            contacts: Vec::new(),
             buffers: Mutex::new((vec![Vec3::zeros(); n], vec![Vec3::zeros(); n])),
         };
         let mut scratch = MemBuffer::new(StackReq::any_of(&[
@@ -371,13 +503,19 @@ impl Simulator {
             let t_dp = Instant::now();
             op.lin.update(self, &rec.x_next);
             grads.profile.dp += t_dp.elapsed();
+            let t_dr = Instant::now();
+            op.contacts = linearize_contacts(self, rec).map_err(|e| match e {
+                Error::Unsupported(m) => Error::Unsupported(format!("recorded step {k}: {m}")),
+                other => other,
+            })?;
+            grads.profile.dr += t_dr.elapsed();
             let t_solve = Instant::now();
             grads.steps[k] = self.solve_adjoint(&op, &rhs, &mut z, options, &mut scratch)?;
             grads.profile.solve += t_solve.elapsed();
-            self.accumulate(rec, &z, &mut grads, k);
+            let (zeta, frame_x) = self.accumulate(rec, &op.contacts, &z, &mut grads, k);
             for i in 0..n {
-                carry_x[i] = mass[i] / (h * h) * z[i] - a_v[i] / h;
-                carry_v[i] = mass[i] / h * z[i];
+                carry_x[i] = mass[i] / (h * h) * z[i] - a_v[i] / h + frame_x[i];
+                carry_v[i] = mass[i] / h * z[i] + mass[i] * zeta[i];
             }
         }
         grads.x0 = carry_x;
@@ -429,20 +567,20 @@ impl Simulator {
         })
     }
 
-    /// Paper Eqn. 30. Returns the iteration count, or None on stall/divergence/cap.
+    /// Paper Eqn. 30: `P z_{k+1} = (P - H^T) z_k + g` (dP and, with contact, the dR term),
+    /// reusing the PD factorization. Returns the iteration count, or None on stall or cap.
     fn fixed_point(&self, op: &AdjointOperator<'_>, g: &[Vec3], z: &mut [Vec3], options: &BackwardOptions, scratch: &mut MemBuffer) -> Option<usize> {
         let n = g.len();
         let mut rhs = g.to_vec();
-        let mut dpz = vec![Vec3::zeros(); n];
+        let (mut pz, mut hz) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n]);
         z.iter_mut().for_each(|v| *v = Vec3::zeros());
         let mut previous = f64::INFINITY;
         let mut growing = 0;
         for it in 1..=options.max_iterations {
-            // z <- P^{-1} (g + dP z): dP z = P z - H z.
-            dpz.iter_mut().for_each(|v| *v = Vec3::zeros());
-            op.lin.sub_dp(self, z, &mut dpz);
+            self.factor().mul_xyz(z, &mut pz);
+            op.apply_nodes(z, &mut hz);
             for i in 0..n {
-                rhs[i] = g[i] - dpz[i];
+                rhs[i] = g[i] + pz[i] - hz[i];
             }
             self.factor().solve_nodes(&mut rhs, MemStack::new(scratch));
             let change = norm(&rhs.iter().zip(z.iter()).map(|(a, b)| a - b).collect::<Vec<_>>());
@@ -499,7 +637,31 @@ impl Simulator {
 
     fn direct(&self, op: &AdjointOperator<'_>, g: &[Vec3], z: &mut [Vec3]) -> Result<()> {
         let n = g.len();
-        let triplets = op.lin.assemble(self, self.factor().matrix());
+        let mut triplets = op.lin.assemble(self, self.factor().matrix());
+        if !op.contacts.is_empty() {
+            // H^T = H_nc - (dP - K) C with C = sum_c S^T Phi'^T E^T and dP - K = M/h^2 - H_nc.
+            let h_nc = SparseColMat::<usize, f64>::try_new_from_triplets(3 * n, 3 * n, &triplets)
+                .map_err(|e| Error::Solver(format!("cannot assemble the adjoint matrix: {e:?}")))?;
+            let hr = h_nc.as_ref();
+            let (mass, h) = (self.masses(), self.params().h);
+            for c in &op.contacts {
+                let pt = c.phi.transpose();
+                for &(k, s) in &c.s {
+                    for &(j, e) in &c.e {
+                        let block = (s * e) * pt; // C[k, j]
+                        for ep in 0..3 {
+                            let col = 3 * k + ep;
+                            for (row, &val) in hr.row_idx_of_col(col).zip(hr.val_of_col(col)) {
+                                let a = if row == col { mass[k] / (h * h) - val } else { -val };
+                                for cp in 0..3 {
+                                    triplets.push(Triplet::new(row, 3 * j + cp, -a * block[(ep, cp)]));
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
         let h = SparseColMat::<usize, f64>::try_new_from_triplets(3 * n, 3 * n, &triplets)
             .map_err(|e| Error::Solver(format!("cannot assemble the adjoint matrix: {e:?}")))?;
         let lu = h.sp_lu().map_err(|e| Error::Solver(format!("adjoint matrix is singular: {e:?}")))?;
@@ -516,18 +678,53 @@ impl Simulator {
         Ok(())
     }
 
-    /// Adds step k's contributions `-z . dg/dtheta` and the per-step action/force gradients.
-    fn accumulate(&self, rec: &StepRecord, z: &[Vec3], grads: &mut Gradients, k: usize) {
+    /// Adds step k's contributions `-z . dF/dtheta` and the per-step action/force gradients.
+    /// Returns `zeta` (the contact adjoint on the nodes' free momenta, for dL/dv_n) and the
+    /// contact frames' contribution to dL/dx_n.
+    fn accumulate(&self, rec: &StepRecord, contacts: &[ContactLin], z: &[Vec3], grads: &mut Gradients, k: usize) -> (Vec<Vec3>, Vec<Vec3>) {
         let p = self.params();
         let h = p.h;
         let x = &rec.x_next;
+        let n = x.len();
         let effects = self.effects();
-        if effects.external_forces {
-            grads.external_forces[k] = z.to_vec();
+        // Contacts: the impulse adjoints, their pull on the free momenta (zeta), the frame.
+        let mut zeta = vec![Vec3::zeros(); n];
+        let mut frame_x = vec![Vec3::zeros(); n];
+        let area = self.node_areas();
+        for c in contacts {
+            let zhat = c.impulse_adjoint(z, h);
+            let w = c.phi.transpose() * zhat;
+            for &(node, s) in &c.s {
+                zeta[node] += s * w;
+            }
+            let dj_dgap = -(c.mass / h) * c.dj_dlambda;
+            let pull_gap = zhat.dot(&dj_dgap);
+            let pull_n = c.dj_dn.transpose() * zhat;
+            for &(node, dgap, dn) in &c.frame {
+                frame_x[node] += pull_gap * dgap + dn.transpose() * pull_n;
+            }
+            if effects.friction {
+                match c.obstacle {
+                    Some(o) => grads.mu_obstacles[o] += zhat.dot(&c.dj_dmu),
+                    None => grads.mu_self += zhat.dot(&c.dj_dmu),
+                }
+            }
+            // Density through the contact mass (the gap term) and the obstacle's momentum.
+            let dm_drho = c.mass / p.density;
+            grads.density += zhat.dot(&(c.dj_dlambda * (-c.gap / h))) * dm_drho;
+            if let Some(&(node, _)) = c.s.first().filter(|_| c.obstacle.is_some()) {
+                grads.density -= w.dot(&(area[node] * c.obstacle_velocity));
+            }
         }
-        if let Some(nodes) = (!self.attachment_nodes().is_empty()).then(|| self.attachment_nodes()) {
-            grads.attachment_targets[k] = nodes.iter().map(|&j| p.k_attach * z[j]).collect();
-            grads.k_attach -= nodes.iter().zip(&rec.targets).map(|(&j, t)| z[j].dot(&(x[j] - t))).sum::<f64>();
+        // The sensitivity to every force on a node: directly (z) and through contacts (h zeta).
+        let zf: Vec<Vec3> = z.iter().zip(&zeta).map(|(a, b)| a + h * b).collect();
+        if effects.external_forces {
+            grads.external_forces[k] = zf.clone();
+        }
+        if !self.attachment_nodes().is_empty() {
+            let nodes = self.attachment_nodes();
+            grads.attachment_targets[k] = nodes.iter().map(|&j| p.k_attach * zf[j]).collect();
+            grads.k_attach -= nodes.iter().zip(&rec.targets).map(|(&j, t)| zf[j].dot(&(x[j] - t))).sum::<f64>();
         }
         if let Some(s) = self.stretch() {
             let (lo, hi) = s.strain_limits();
@@ -536,7 +733,7 @@ impl Simulator {
                 let f = s.deformation_gradient(t, x);
                 let r = (f - crate::energy::project_singular_values(&f, lo, hi)) * s.rest_area(t);
                 for l in 0..3 {
-                    dot += z[tri[l]].dot(&(r * s.shape(t)[l]));
+                    dot += zf[tri[l]].dot(&(r * s.shape(t)[l]));
                 }
             }
             grads.k_stretch -= dot;
@@ -547,29 +744,32 @@ impl Simulator {
                 let r = (b.curvature(i, x) - b.projection(i, x)) * b.area(i);
                 let (nbrs, coefs) = b.stencil(i);
                 for (&j, &c) in nbrs.iter().zip(coefs) {
-                    dot += c * (z[j] - z[center]).dot(&r);
+                    dot += c * (zf[j] - zf[center]).dot(&r);
                 }
             }
             grads.k_bend -= dot;
         }
-        let area = self.node_areas();
         let mass = self.masses();
-        for i in 0..x.len() {
+        for i in 0..n {
+            // dF/drho from the inertia term, and the momentum (M v_n + h M g) through contacts.
             let mut dg = area[i] * (x[i] - rec.x_prev[i] - h * rec.v_prev[i]) / (h * h);
+            let mut dd = area[i] * rec.v_prev[i];
             if effects.gravity {
                 dg -= area[i] * p.gravity;
-                grads.gravity += mass[i] * z[i];
+                dd += h * area[i] * p.gravity;
+                grads.gravity += mass[i] * zf[i];
             }
-            grads.density -= z[i].dot(&dg);
+            grads.density += -z[i].dot(&dg) + zeta[i].dot(&dd);
         }
-        if let Some(w) = self.wind() {
-            let s = w.modulation(rec.time);
-            let ds = 0.5 * (w.omega * rec.time + w.phi).cos();
-            let kz: Vec3 = z.iter().zip(w.coefficient()).map(|(zi, k)| *k * zi).sum();
+        if let Some(wind) = self.wind() {
+            let s = wind.modulation(rec.time);
+            let ds = 0.5 * (wind.omega * rec.time + wind.phi).cos();
+            let kz: Vec3 = zf.iter().zip(wind.coefficient()).map(|(zi, c)| *c * zi).sum();
             grads.wind_direction += s * kz;
-            grads.wind_omega += ds * rec.time * kz.dot(&w.direction);
-            grads.wind_phi += ds * kz.dot(&w.direction);
+            grads.wind_omega += ds * rec.time * kz.dot(&wind.direction);
+            grads.wind_phi += ds * kz.dot(&wind.direction);
         }
+        (zeta, frame_x)
     }
 }
 

@@ -431,6 +431,26 @@ impl Simulator {
         }
     }
 
+    /// Sets the friction coefficient of obstacle `index`.
+    pub fn set_obstacle_mu(&mut self, index: usize, mu: f64) -> Result<()> {
+        check_mu("mu", mu).map_err(|e| Error::Param(e.to_string()))?;
+        let count = self.obstacles.len();
+        let o = self
+            .obstacles
+            .get_mut(index)
+            .ok_or_else(|| Error::Param(format!("obstacle {index} does not exist ({count} obstacles)")))?;
+        o.mu = mu;
+        Ok(())
+    }
+
+    /// Sets the self-contact friction coefficient.
+    pub fn set_self_mu(&mut self, mu: f64) -> Result<()> {
+        check_mu("mu", mu).map_err(|e| Error::Param(e.to_string()))?;
+        let sc = self.self_collision.as_mut().ok_or_else(|| Error::Param("the scene has no self-collision".into()))?;
+        sc.mu = mu;
+        Ok(())
+    }
+
     pub fn set_solver(&mut self, solver: SolverSettings) -> Result<()> {
         validate_solver(&solver)?;
         if solver.history != self.solver.history {

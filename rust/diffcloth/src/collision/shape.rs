@@ -3,7 +3,7 @@
 //! triangulated surfaces: triangulated normals jump across edges (paper Sec. 5.1).
 
 use crate::Vec3;
-use nalgebra::Rotation3;
+use nalgebra::{Matrix3, Rotation3};
 
 #[derive(Debug, Clone)]
 pub enum Shape {
@@ -65,6 +65,73 @@ impl Shape {
                 .map(|s| s.distance(p))
                 .min_by(|a, b| a.0.total_cmp(&b.0))
                 .unwrap_or((f64::INFINITY, Vec3::y())),
+        }
+    }
+
+    /// Jacobian of the outward normal with respect to the point (the Hessian of the signed
+    /// distance): zero on flat parts, `(I - n n^T) / r` on a sphere of radius r, the
+    /// cylinder's `(I - n n^T - t t^T) / r` along a capsule, and the cavity's negative.
+    pub fn normal_jacobian(&self, p: &Vec3) -> Matrix3<f64> {
+        let curved = |v: Vec3| {
+            let (len, n) = length_and_direction(v);
+            if len > 0.0 {
+                (Matrix3::identity() - n * n.transpose()) / len
+            } else {
+                Matrix3::zeros()
+            }
+        };
+        match self {
+            Shape::Plane { .. } => Matrix3::zeros(),
+            Shape::Sphere { center, .. } => curved(p - center),
+            Shape::Capsule { a, b, .. } => {
+                let ab = b - a;
+                let t = (p - a).dot(&ab) / ab.norm_squared().max(f64::MIN_POSITIVE);
+                if t <= 0.0 {
+                    curved(p - a)
+                } else if t >= 1.0 {
+                    curved(p - b)
+                } else {
+                    let axis = ab.normalize();
+                    let radial = p - (a + t * ab);
+                    let (len, n) = length_and_direction(radial);
+                    if len > 0.0 {
+                        (Matrix3::identity() - n * n.transpose() - axis * axis.transpose()) / len
+                    } else {
+                        Matrix3::zeros()
+                    }
+                }
+            }
+            Shape::Box { center, half_extents, rotation } => {
+                let local = rotation.inverse() * (p - center);
+                let q = local.abs() - half_extents;
+                let outside = q.sup(&Vec3::zeros());
+                let len = outside.norm();
+                if len == 0.0 {
+                    return Matrix3::zeros();
+                }
+                // Outside near an edge or corner: curvature across the active axes only.
+                let mut active = Matrix3::zeros();
+                for k in 0..3 {
+                    if q[k] > 0.0 {
+                        active[(k, k)] = 1.0;
+                    }
+                }
+                let n = outside.component_mul(&local.map(f64::signum)) / len;
+                let r = rotation.matrix();
+                r * ((active - n * n.transpose()) / len) * r.transpose()
+            }
+            Shape::Bowl { center, radius, rim_height } => {
+                let (len, _) = length_and_direction(p - center);
+                if radius - len >= p.y - rim_height {
+                    -curved(p - center)
+                } else {
+                    Matrix3::zeros()
+                }
+            }
+            Shape::Union(parts) => parts
+                .iter()
+                .min_by(|a, b| a.distance(p).0.total_cmp(&b.distance(p).0))
+                .map_or(Matrix3::zeros(), |s| s.normal_jacobian(p)),
         }
     }
 
@@ -130,6 +197,13 @@ mod tests {
             assert!((fd - n[k]).abs() < 1e-6, "{s:?} at {p:?}: d/dx{k} {fd} vs normal {}", n[k]);
         }
         assert!((n.norm() - 1.0).abs() < 1e-12);
+        let jac = s.normal_jacobian(&p);
+        for k in 0..3 {
+            let mut e = Vec3::zeros();
+            e[k] = eps;
+            let fd = (s.distance(&(p + e)).1 - s.distance(&(p - e)).1) / (2.0 * eps);
+            assert!((fd - jac.column(k)).norm() < 1e-5, "{s:?} at {p:?}: dn/dx{k} {fd:?} vs {:?}", jac.column(k));
+        }
     }
 
     #[test]
@@ -154,7 +228,7 @@ mod tests {
         assert!(bowl.distance(&Vec3::new(5.0, 1.0, 0.0)).0 > 0.0, "above the rim");
         let union = Shape::Union(vec![sphere.clone(), capsule.clone()]);
         assert!((union.distance(&Vec3::new(0.0, 0.0, 3.0)).0 - 1.0).abs() < 1e-15);
-        for p in [Vec3::new(0.3, 2.7, -0.4), Vec3::new(1.5, -0.2, 0.9), Vec3::new(-0.7, 0.1, 3.3)] {
+        for p in [Vec3::new(0.3, 2.7, -0.4), Vec3::new(1.5, -0.2, 0.9), Vec3::new(-0.7, 0.1, 3.3), Vec3::new(1.4, 2.6, 0.1), Vec3::new(1.3, 2.4, 3.5)] {
             for s in [&plane, &sphere, &capsule, &boxed, &bowl, &union] {
                 check_gradient(s, p);
             }
