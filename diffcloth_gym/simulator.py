@@ -161,7 +161,8 @@ class Simulator:
         self._core.set_params(**params)
 
     def solver(self) -> dict:
-        """Accuracy knobs: max_iterations, tolerance, acceleration, history, parallel."""
+        """Accuracy knobs: max_iterations, tolerance, record_tolerance (for steps recorded for
+        backward, default 1e-10), acceleration, history, parallel."""
         return self._core.solver()
 
     def set_solver(self, **settings: Any) -> None:
@@ -192,8 +193,9 @@ class Simulator:
         ``external_forces``; scalars ``k_stretch``, ``k_bend``, ``k_attach``, ``density``,
         ``wind_omega``, ``wind_phi``, ``mu_self``; ``mu_obstacles`` (one per obstacle); 3-lists
         ``gravity``, ``wind_direction``; per-step solver
-        stats ``iterations``, ``fell_back``, ``residual``; and a stage ``profile``.
-        Gradients are never clipped or rescaled.
+        stats ``iterations``, ``fell_back``, ``residual``; a stage ``profile``; and ``warnings``:
+        the reasons the gradient may be untrustworthy (e.g. recorded steps that stopped above
+        the residual the adjoint needs). Gradients are never clipped or rescaled.
         """
         steps, _ = self.tape_info()
         def grads(name, a):

@@ -240,6 +240,7 @@ impl PySimulator {
         d.set_item("acceleration", if s.anderson { "anderson" } else { "none" })?;
         d.set_item("history", s.history)?;
         d.set_item("parallel", s.parallel)?;
+        d.set_item("record_tolerance", s.record_tolerance)?;
         Ok(d)
     }
 
@@ -254,6 +255,7 @@ impl PySimulator {
                 match key.as_str() {
                     "max_iterations" => s.max_iterations = value.extract().map_err(|_| bad("a positive integer"))?,
                     "tolerance" => s.tolerance = value.extract().map_err(|_| bad("a number"))?,
+                    "record_tolerance" => s.record_tolerance = value.extract().map_err(|_| bad("a number"))?,
                     "history" => s.history = value.extract().map_err(|_| bad("an integer"))?,
                     "parallel" => s.parallel = value.extract().map_err(|_| bad("a bool"))?,
                     "acceleration" => {
@@ -268,7 +270,7 @@ impl PySimulator {
                         return Err(raise(
                             py,
                             "ParameterError",
-                            format!("unknown solver setting {other:?}; known: max_iterations, tolerance, acceleration, history, parallel"),
+                            format!("unknown solver setting {other:?}; known: max_iterations, tolerance, record_tolerance, acceleration, history, parallel"),
                         ))
                     }
                 }
@@ -422,6 +424,7 @@ impl PySimulator {
         prof.set_item("solve_s", g.profile.solve.as_secs_f64())?;
         prof.set_item("other_s", g.profile.other.as_secs_f64())?;
         d.set_item("profile", prof)?;
+        d.set_item("warnings", g.warnings.clone())?;
         Ok(d)
     }
 

@@ -47,6 +47,8 @@ pub struct SolverSettings {
     pub max_iterations: usize,
     /// Stop when the RMS per-coordinate PD update `|G(x) - x|` is below this (metres).
     pub tolerance: f64,
+    /// Tolerance of steps recorded on a tape (see `SolverConfig::record_tolerance`).
+    pub record_tolerance: f64,
     /// Energy-guarded Anderson acceleration on/off.
     pub anderson: bool,
     /// Anderson history length (1..=8).
@@ -140,6 +142,7 @@ impl Simulator {
         let solver = SolverSettings {
             max_iterations: s.max_iterations,
             tolerance: s.tolerance,
+            record_tolerance: s.record_tolerance,
             anderson: match s.acceleration.as_str() {
                 "anderson" => true,
                 "none" => false,
@@ -625,7 +628,10 @@ impl Simulator {
         if let Some(t) = self.trace.as_mut() {
             t.clear();
         }
-        let tol = self.solver.tolerance;
+        // Recorded steps converge further: the adjoint needs the converged solution.
+        let user_tol = self.solver.tolerance;
+        let tol = if self.tape.is_some() { user_tol.min(self.solver.record_tolerance) } else { user_tol };
+        let mut reached_user_tol: Option<usize> = None;
         let max_it = self.solver.max_iterations;
         let energy_guard = self.contacts.is_empty();
         let mut energy = self.local_step(Buffer::Iterate);
@@ -656,6 +662,9 @@ impl Simulator {
                             energy = trial;
                             residual = trial_residual;
                             self.record(energy, residual);
+                            if reached_user_tol.is_none() && residual <= user_tol {
+                                reached_user_tol = Some(iterations);
+                            }
                             continue;
                         }
                         // Undo: back to x_k and G(x_k).
@@ -676,6 +685,12 @@ impl Simulator {
             residual = self.global_step();
             iterations += 1;
             self.record(energy, residual);
+            if reached_user_tol.is_none() && residual <= user_tol {
+                reached_user_tol = Some(iterations);
+            }
+        }
+        if let Some(at) = reached_user_tol {
+            self.profile.polish_iterations += (iterations - at) as u64;
         }
         StepStats { iterations, residual, converged: residual <= tol, contacts: self.contacts.counts() }
     }
@@ -833,6 +848,12 @@ fn validate_solver(s: &SolverSettings) -> Result<()> {
     }
     if !(s.tolerance >= 0.0 && s.tolerance.is_finite()) {
         return Err(Error::Param(format!("solver tolerance must be non-negative and finite, got {}", s.tolerance)));
+    }
+    if !(s.record_tolerance >= 0.0 && s.record_tolerance.is_finite()) {
+        return Err(Error::Param(format!(
+            "solver record_tolerance must be non-negative and finite, got {}",
+            s.record_tolerance
+        )));
     }
     if !(1..=crate::anderson::MAX_HISTORY).contains(&s.history) {
         return Err(Error::Param(format!(

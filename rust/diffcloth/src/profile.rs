@@ -11,6 +11,8 @@ pub struct Profile {
     pub iterations: u64,
     /// Steps that stopped at the iteration cap before reaching the tolerance.
     pub unconverged_steps: u64,
+    /// Iterations spent converging recorded steps beyond the user tolerance (for gradients).
+    pub polish_iterations: u64,
     /// Accelerated iterates rejected by the energy guard (the plain PD step was taken).
     pub acceleration_rejections: u64,
     /// Local step: projections onto each constraint set and the right-hand side gather.
@@ -42,6 +44,7 @@ impl Profile {
             ("iterations", self.iterations as f64),
             ("unconverged_steps", self.unconverged_steps as f64),
             ("acceleration_rejections", self.acceleration_rejections as f64),
+            ("polish_iterations", self.polish_iterations as f64),
             ("refactorizations", self.refactorizations as f64),
             ("local_s", self.local.as_secs_f64()),
             ("global_s", self.global.as_secs_f64()),
