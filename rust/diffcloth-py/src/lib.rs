@@ -241,6 +241,7 @@ impl PySimulator {
         d.set_item("history", s.history)?;
         d.set_item("parallel", s.parallel)?;
         d.set_item("record_tolerance", s.record_tolerance)?;
+        d.set_item("record_max_iterations", s.record_max_iterations)?;
         Ok(d)
     }
 
@@ -256,6 +257,7 @@ impl PySimulator {
                     "max_iterations" => s.max_iterations = value.extract().map_err(|_| bad("a positive integer"))?,
                     "tolerance" => s.tolerance = value.extract().map_err(|_| bad("a number"))?,
                     "record_tolerance" => s.record_tolerance = value.extract().map_err(|_| bad("a number"))?,
+                    "record_max_iterations" => s.record_max_iterations = value.extract().map_err(|_| bad("a positive integer"))?,
                     "history" => s.history = value.extract().map_err(|_| bad("an integer"))?,
                     "parallel" => s.parallel = value.extract().map_err(|_| bad("a bool"))?,
                     "acceleration" => {
@@ -270,7 +272,7 @@ impl PySimulator {
                         return Err(raise(
                             py,
                             "ParameterError",
-                            format!("unknown solver setting {other:?}; known: max_iterations, tolerance, record_tolerance, acceleration, history, parallel"),
+                            format!("unknown solver setting {other:?}; known: max_iterations, tolerance, record_tolerance, record_max_iterations, acceleration, history, parallel"),
                         ))
                     }
                 }

@@ -219,6 +219,9 @@ pub struct SolverConfig {
     /// polish in the profile.
     #[serde(default = "default_record_tolerance")]
     pub record_tolerance: f64,
+    /// Iteration cap of recorded steps (default 2000; the larger of this and max_iterations).
+    #[serde(default = "default_record_max_iterations")]
+    pub record_max_iterations: usize,
     /// "anderson" (default) or "none" (plain local-global).
     #[serde(default = "default_acceleration")]
     pub acceleration: String,
@@ -236,6 +239,7 @@ impl Default for SolverConfig {
             max_iterations: default_max_iterations(),
             tolerance: default_tolerance(),
             record_tolerance: default_record_tolerance(),
+            record_max_iterations: default_record_max_iterations(),
             acceleration: default_acceleration(),
             history: default_history(),
             parallel: true,
@@ -278,6 +282,9 @@ fn default_max_iterations() -> usize {
 }
 fn default_tolerance() -> f64 {
     1e-8
+}
+fn default_record_max_iterations() -> usize {
+    2000
 }
 fn default_record_tolerance() -> f64 {
     1e-10

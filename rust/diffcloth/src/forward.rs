@@ -49,6 +49,8 @@ pub struct SolverSettings {
     pub tolerance: f64,
     /// Tolerance of steps recorded on a tape (see `SolverConfig::record_tolerance`).
     pub record_tolerance: f64,
+    /// Iteration cap of recorded steps (the larger of this and `max_iterations`).
+    pub record_max_iterations: usize,
     /// Energy-guarded Anderson acceleration on/off.
     pub anderson: bool,
     /// Anderson history length (1..=8).
@@ -143,6 +145,7 @@ impl Simulator {
             max_iterations: s.max_iterations,
             tolerance: s.tolerance,
             record_tolerance: s.record_tolerance,
+            record_max_iterations: s.record_max_iterations,
             anderson: match s.acceleration.as_str() {
                 "anderson" => true,
                 "none" => false,
@@ -632,7 +635,11 @@ impl Simulator {
         let user_tol = self.solver.tolerance;
         let tol = if self.tape.is_some() { user_tol.min(self.solver.record_tolerance) } else { user_tol };
         let mut reached_user_tol: Option<usize> = None;
-        let max_it = self.solver.max_iterations;
+        let max_it = if self.tape.is_some() {
+            self.solver.max_iterations.max(self.solver.record_max_iterations)
+        } else {
+            self.solver.max_iterations
+        };
         let energy_guard = self.contacts.is_empty();
         let mut energy = self.local_step(Buffer::Iterate);
         self.solve_contacts(Buffer::Iterate);
