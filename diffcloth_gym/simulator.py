@@ -126,8 +126,12 @@ class Simulator:
 
     @property
     def time(self) -> float:
-        """Simulated time since reset in seconds."""
+        """Simulated time since reset in seconds (settable: wind and moving obstacles use it)."""
         return self._core.time
+
+    @time.setter
+    def time(self, t: float) -> None:
+        self._core.time = float(t)
 
     @property
     def attachment_nodes(self) -> list[int]:

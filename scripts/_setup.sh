@@ -15,7 +15,9 @@ fi
 STAMP="$VENV/.deps-$(sha1sum pyproject.toml | cut -c1-16)"
 if [ ! -f "$STAMP" ]; then
   echo "== installing Python dependencies"
-  "$PY" -m pip install -q --disable-pip-version-check "maturin>=1.9.4,<2" "numpy>=1.26" "pytest>=8" "matplotlib>=3.8"
+  # torch: the CPU runs use PyPI's default wheel (it brings CUDA libraries; ~1-2 min fresh).
+  "$PY" -m pip install -q --disable-pip-version-check "maturin>=1.9.4,<2" "numpy>=1.26" "pytest>=8" \
+    "matplotlib>=3.8" "torch>=2.8"
   rm -f "$VENV"/.deps-*
   touch "$STAMP"
 fi

@@ -1,9 +1,12 @@
 """Gradients from Python: backward() against central finite differences, errors."""
 
+import tomllib
+
 import numpy as np
 import pytest
 
 from diffcloth_gym import InputError, Simulator
+from diffcloth_gym.simulator import CONFIG_DIR
 
 CFG = {
     "h": 0.01,
@@ -92,3 +95,25 @@ def test_backward_through_sliding_contact_gives_the_friction_gradient():
         return float(np.mean(s.positions @ downhill))
     fd = (travel(0.5 + 1e-4) - travel(0.5 - 1e-4)) / 2e-4
     assert abs(g["mu_obstacles"][0] - fd) <= 1e-5 * abs(fd)
+
+
+@pytest.mark.parametrize("scene", ["wind", "slope"])
+def test_iterative_solvers_match_direct_at_1e_8(scene):
+    """Paper Table 1 setting: iterative backward at eps 1e-8 agrees with the direct solve."""
+    cfg = tomllib.loads((CONFIG_DIR / f"{scene}.toml").read_text())
+    cfg["mesh"].update(rows=12, cols=12)
+    sim = Simulator.from_config(cfg)
+    sim.set_recording(True)
+    steps = 30
+    sim.step(steps=steps)
+    w = np.random.default_rng(3).normal(0, 1, (steps, sim.num_nodes, 3))
+    ref = sim.backward(dl_dx=w, solver="direct")
+    # The default Krylov solver meets 1e-6. The paper's fixed-point scheme converges linearly
+    # and stops just below eps at every step; over 30 steps it ends near 1e-6 (measured 1.03e-6
+    # on Wind), hence its looser bound.
+    for solver, bound in [("krylov", 1e-6), ("fixed_point", 1e-5)]:
+        g = sim.backward(dl_dx=w, solver=solver, tolerance=1e-8)
+        assert not any(g["fell_back"])
+        for key in ["v0", "x0"]:
+            rel = np.linalg.norm(g[key] - ref[key]) / np.linalg.norm(ref[key])
+            assert rel <= bound, (scene, solver, key, rel)

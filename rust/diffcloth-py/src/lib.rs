@@ -165,6 +165,11 @@ impl PySimulator {
     fn time(&self) -> f64 {
         self.inner.time()
     }
+    #[setter]
+    fn set_time(&mut self, py: Python<'_>, t: f64) -> PyResult<()> {
+        let sim = &mut self.inner;
+        guarded(py, || sim.set_time(t))
+    }
     #[getter]
     fn step_count(&self) -> u64 {
         self.inner.step_count()

@@ -691,25 +691,21 @@ impl Simulator {
     }
 
     /// Paper Eqn. 30: `P z_{k+1} = (P - H^T) z_k + g` (dP and, with contact, the dR term),
-    /// reusing the PD factorization. Returns the iteration count, or None on stall or cap.
+    /// reusing the PD factorization. Stops on the true relative residual `|g - H^T z| / |g|`
+    /// (free: `H^T z` is needed for the update anyway), not on the update size, which
+    /// understates the error when the iteration converges slowly. Returns the iteration count,
+    /// or None on divergence or at the cap.
     fn fixed_point(&self, op: &AdjointOperator<'_>, g: &[Vec3], z: &mut [Vec3], options: &BackwardOptions, scratch: &mut MemBuffer) -> Option<usize> {
         let n = g.len();
+        let g_norm = norm(g);
         let mut rhs = g.to_vec();
         let (mut pz, mut hz) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n]);
         z.iter_mut().for_each(|v| *v = Vec3::zeros());
         let mut previous = f64::INFINITY;
         let mut growing = 0;
-        for it in 1..=options.max_iterations {
-            self.factor().mul_xyz(z, &mut pz);
+        for it in 0..=options.max_iterations {
             op.apply_nodes(z, &mut hz);
-            for i in 0..n {
-                rhs[i] = g[i] + pz[i] - hz[i];
-            }
-            self.factor().solve_nodes(&mut rhs, MemStack::new(scratch));
-            let change = norm(&rhs.iter().zip(z.iter()).map(|(a, b)| a - b).collect::<Vec<_>>());
-            z.copy_from_slice(&rhs);
-            // Relative update (the paper's stopping rule); solve_adjoint checks the residual.
-            let residual = change / norm(z).max(f64::MIN_POSITIVE);
+            let residual = norm(&g.iter().zip(&hz).map(|(a, b)| a - b).collect::<Vec<_>>()) / g_norm;
             if !residual.is_finite() {
                 return None;
             }
@@ -717,10 +713,16 @@ impl Simulator {
                 return Some(it);
             }
             growing = if residual > previous { growing + 1 } else { 0 };
-            if growing >= 5 {
+            if growing >= 5 || it == options.max_iterations {
                 return None;
             }
             previous = residual;
+            self.factor().mul_xyz(z, &mut pz);
+            for i in 0..n {
+                rhs[i] = g[i] + pz[i] - hz[i];
+            }
+            self.factor().solve_nodes(&mut rhs, MemStack::new(scratch));
+            z.copy_from_slice(&rhs);
         }
         None
     }

@@ -393,6 +393,15 @@ impl Simulator {
         Ok(())
     }
 
+    /// Sets the simulated time (the wind's phase and moving obstacles depend on it).
+    pub fn set_time(&mut self, t: f64) -> Result<()> {
+        if !t.is_finite() {
+            return Err(Error::Input(format!("time must be finite, got {t}")));
+        }
+        self.time = t;
+        Ok(())
+    }
+
     /// Replaces the physical parameters; refactors the system matrix only if h, density or a
     /// stiffness changed. On error nothing is changed.
     pub fn set_params(&mut self, params: Params) -> Result<()> {
