@@ -16,6 +16,7 @@ use crate::tape::StepRecord;
 use crate::Vec3;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::matrix_free::bicgstab::{bicgstab, bicgstab_scratch, BicgParams};
+use faer::matrix_free::conjugate_gradient::{conjugate_gradient, conjugate_gradient_scratch, CgParams};
 use faer::matrix_free::{IdentityPrecond, InitialGuessStatus, LinOp, Precond};
 use faer::prelude::*;
 use faer::sparse::{SparseColMat, Triplet};
@@ -29,7 +30,8 @@ use std::time::{Duration, Instant};
 pub enum AdjointSolver {
     /// Sparse LU of the assembled `H` (the reference).
     Direct,
-    /// BiCGStab preconditioned by the PD factorization of `P` (the default).
+    /// Preconditioned by the PD factorization of `P` (the default): conjugate gradients when
+    /// `H` is symmetric (no active contact), else BiCGStab.
     Krylov,
     /// The paper's Eqn. 30: `P z_{k+1} = dP z_k + g`, reusing the PD factorization.
     FixedPoint,
@@ -596,6 +598,7 @@ impl Simulator {
         };
         let mut scratch = MemBuffer::new(StackReq::any_of(&[
             bicgstab_scratch(IdentityPrecond { dim: 3 * n }, PdPreconditioner { factor: self.factor() }, &op, 1, Par::Seq),
+            conjugate_gradient_scratch(PdPreconditioner { factor: self.factor() }, &op, 1, Par::Seq),
             self.factor().solve_scratch(),
         ]));
         for k in (0..steps).rev() {
@@ -700,7 +703,10 @@ impl Simulator {
         let g_norm = norm(g);
         let mut rhs = g.to_vec();
         let (mut pz, mut hz) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n]);
-        z.iter_mut().for_each(|v| *v = Vec3::zeros());
+        // Warm start from the previous step's adjoint (kept in z), unless it is unusable.
+        if !z.iter().all(|v| v.iter().all(|c| c.is_finite())) {
+            z.iter_mut().for_each(|v| *v = Vec3::zeros());
+        }
         let mut previous = f64::INFINITY;
         let mut growing = 0;
         for it in 0..=options.max_iterations {
@@ -735,10 +741,42 @@ impl Simulator {
                 rhs[(3 * i + d, 0)] = g[i][d];
             }
         }
+        // Warm start from the previous (later) step's adjoint: consecutive adjoints are close.
         let mut out = Mat::<f64>::zeros(3 * n, 1);
+        for i in 0..n {
+            for d in 0..3 {
+                out[(3 * i + d, 0)] = if z[i][d].is_finite() { z[i][d] } else { 0.0 };
+            }
+        }
+        // Without active contacts H = P - dP is symmetric: preconditioned CG needs one operator
+        // and one preconditioner application per iteration (BiCGStab two of each). CG reports
+        // an indefinite H (possible away from the converged solution); BiCGStab then takes over.
+        if op.contacts.is_empty() {
+            let mut cg_out = out.clone();
+            let mut cg = CgParams::<f64>::default();
+            cg.initial_guess = InitialGuessStatus::MaybeNonZero;
+            cg.rel_tolerance = options.tolerance;
+            cg.max_iters = options.max_iterations;
+            let result = conjugate_gradient(
+                cg_out.as_mut(),
+                PdPreconditioner { factor: self.factor() },
+                op,
+                rhs.as_ref(),
+                cg,
+                |_| {},
+                Par::Seq,
+                MemStack::new(scratch),
+            );
+            if let Ok(info) = result {
+                for i in 0..n {
+                    z[i] = Vec3::new(cg_out[(3 * i, 0)], cg_out[(3 * i + 1, 0)], cg_out[(3 * i + 2, 0)]);
+                }
+                return Some(info.iter_count);
+            }
+        }
         let mut params = BicgParams::<f64>::default();
-        // faer 0.24's BiCGStab leaves its residual vector uninitialized for
-        // `InitialGuessStatus::Zero`; a zero guess declared `MaybeNonZero` computes r = g - H 0.
+        // (Also: faer 0.24's BiCGStab leaves its residual vector uninitialized for
+        // `InitialGuessStatus::Zero`; `MaybeNonZero` computes r = g - H z0.)
         params.initial_guess = InitialGuessStatus::MaybeNonZero;
         params.rel_tolerance = options.tolerance;
         params.max_iters = options.max_iterations;
