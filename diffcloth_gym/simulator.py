@@ -174,10 +174,13 @@ class Simulator:
         self._core.set_solver(**settings)
 
     # -- gradients -----------------------------------------------------------------------
-    def set_recording(self, on: bool = True) -> None:
+    def set_recording(self, on: bool = True, checkpoint_every: int | None = None) -> None:
         """Starts recording steps on a tape for :meth:`backward` (clearing any previous tape),
-        or stops. :meth:`reset` also clears the tape."""
-        self._core.set_recording(bool(on))
+        or stops. :meth:`reset` also clears the tape. With ``checkpoint_every=K`` only every
+        K-th state and each step's inputs are kept (memory no longer grows with the mesh size
+        times the horizon); :meth:`backward` re-simulates one segment at a time and returns the
+        same gradients."""
+        self._core.set_recording(bool(on), checkpoint_every)
 
     def tape_info(self) -> tuple[int, int]:
         """``(recorded steps, bytes held by the tape)``."""

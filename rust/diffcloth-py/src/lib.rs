@@ -367,21 +367,34 @@ impl PySimulator {
         guarded(py, || sim.set_self_mu(mu))
     }
 
-    /// Starts (clearing the tape) or stops recording steps for backward().
-    fn set_recording(&mut self, on: bool) {
-        self.inner.set_recording(on);
+    /// Starts (clearing the tape) or stops recording steps for backward(); with
+    /// checkpoint_every = K only every K-th state (plus each step's inputs) is kept and
+    /// backward re-simulates segments.
+    #[pyo3(signature = (on, checkpoint_every=None))]
+    fn set_recording(&mut self, py: Python<'_>, on: bool, checkpoint_every: Option<usize>) -> PyResult<()> {
+        match (on, checkpoint_every) {
+            (true, Some(0)) => Err(raise(py, "ParameterError", "checkpoint_every must be at least 1".into())),
+            (true, Some(k)) => {
+                self.inner.set_recording_checkpointed(k);
+                Ok(())
+            }
+            _ => {
+                self.inner.set_recording(on);
+                Ok(())
+            }
+        }
     }
 
     /// (recorded steps, bytes held by the tape).
     fn tape_info(&self) -> (usize, usize) {
-        self.inner.tape().map_or((0, 0), |t| (t.records.len(), t.bytes()))
+        self.inner.tape().map_or((0, 0), |t| (t.len(), t.bytes()))
     }
 
     /// Backpropagates dL/dx and dL/dv of every recorded step's output (arrays (N, n, 3) or
     /// None) and returns the gradients as a dict.
     #[pyo3(signature = (dl_dx=None, dl_dv=None, solver="krylov", tolerance=1e-10, max_iterations=500))]
     fn backward<'py>(
-        &self,
+        &mut self,
         py: Python<'py>,
         dl_dx: Option<numpy::PyReadonlyArray3<'_, f64>>,
         dl_dv: Option<numpy::PyReadonlyArray3<'_, f64>>,
@@ -406,7 +419,7 @@ impl PySimulator {
             Ok(v.outer_iter().map(|step| step.outer_iter().map(|r| Vec3::new(r[0], r[1], r[2])).collect()).collect())
         };
         let (gx, gv) = (read("dl_dx", dl_dx)?, read("dl_dv", dl_dv)?);
-        let sim = &self.inner;
+        let sim = &mut self.inner;
         let options = BackwardOptions { solver, tolerance, max_iterations };
         let g = guarded(py, || sim.backward(&gx, &gv, &options))?;
         let d = PyDict::new(py);

@@ -14,7 +14,7 @@ use crate::linalg::SpdFactor;
 use crate::mesh::TriMesh;
 use crate::profile::{timed, Profile};
 use crate::scene::{attachment_nodes, build_mesh};
-use crate::tape::{StepRecord, Tape};
+use crate::tape::{Checkpoint, StepInputs, StepRecord, Tape};
 use crate::Vec3;
 use std::time::Instant;
 
@@ -332,6 +332,24 @@ impl Simulator {
     pub fn set_recording(&mut self, on: bool) {
         self.tape = on.then(Tape::default);
     }
+
+    /// Starts a checkpointed recording: one state every `every` steps plus each step's inputs;
+    /// `backward` re-simulates one segment at a time (same gradients, bounded memory).
+    pub fn set_recording_checkpointed(&mut self, every: usize) {
+        self.tape = Some(Tape::checkpointed(every));
+    }
+
+    pub(crate) fn attachments_mut(&mut self) -> Option<&mut Attachments> {
+        self.attachments.as_mut()
+    }
+
+    pub(crate) fn take_tape(&mut self) -> Option<Tape> {
+        self.tape.take()
+    }
+
+    pub(crate) fn put_tape(&mut self, tape: Option<Tape>) {
+        self.tape = tape;
+    }
     pub fn tape(&self) -> Option<&Tape> {
         self.tape.as_ref()
     }
@@ -485,6 +503,7 @@ impl Simulator {
         let start = Instant::now();
         let p0 = self.profile.clone();
         self.prepare(input)?;
+        self.record_inputs(&input);
         if self.effects.has_contact() {
             let detect_start = Instant::now();
             self.contacts.detect(
@@ -503,12 +522,19 @@ impl Simulator {
         // The PD result is in `mapped`.
         let h = self.params.h;
         if !self.mapped.iter().all(|p| p.iter().all(|c| c.is_finite())) {
+            if let Some(tape) = self.tape.as_mut().filter(|t| t.checkpoint_every.is_some()) {
+                // The step did not happen: forget its inputs (and its checkpoint).
+                tape.inputs.pop();
+                if tape.checkpoints.last().is_some_and(|c| c.step == tape.inputs.len()) {
+                    tape.checkpoints.pop();
+                }
+            }
             return Err(Error::Diverged(format!(
                 "non-finite positions at step {}; state left at the previous step",
                 self.step_count
             )));
         }
-        if let Some(tape) = self.tape.as_mut() {
+        if let Some(tape) = self.tape.as_mut().filter(|t| t.checkpoint_every.is_none()) {
             tape.records.push(StepRecord {
                 x_prev: self.x.clone(),
                 v_prev: self.v.clone(),
@@ -538,6 +564,21 @@ impl Simulator {
         let staged = (p.local - p0.local) + (p.global - p0.global) + (p.detection - p0.detection) + (p.contact_solve - p0.contact_solve);
         p.other += total.saturating_sub(staged);
         Ok(stats)
+    }
+
+    /// Checkpointed recording: the entering state at segment starts, and every step's inputs.
+    fn record_inputs(&mut self, input: &StepInput<'_>) {
+        let Some(tape) = self.tape.as_mut() else { return };
+        let Some(every) = tape.checkpoint_every else { return };
+        let index = tape.inputs.len();
+        if index % every == 0 {
+            tape.checkpoints.push(Checkpoint { step: index, x: self.x.clone(), v: self.v.clone(), time: self.time });
+        }
+        tape.inputs.push(StepInputs {
+            // `prepare` has already applied this step's targets.
+            targets: self.attachments.as_ref().map(|a| a.targets().to_vec()),
+            forces: input.external_forces.map(<[Vec3]>::to_vec),
+        });
     }
 
     /// Validates the inputs and computes the inertial prediction
