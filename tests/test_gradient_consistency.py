@@ -49,7 +49,7 @@ def compare(a, b):
     return np.linalg.norm(a - b) / np.linalg.norm(b), a @ b / (np.linalg.norm(a) * np.linalg.norm(b))
 
 
-@pytest.mark.parametrize("name, mesh", [("hat", {}), ("wind", {"rows": 24, "cols": 24})])
+@pytest.mark.parametrize("name, mesh", [("hat", {}), ("sock", {}), ("wind", {"rows": 24, "cols": 24})])
 def test_default_settings_give_the_converged_gradient(name, mesh):
     cfg = contact_free(name, **mesh)
     default, default_targets = rollout_gradients(cfg)
