@@ -21,6 +21,7 @@ use faer::matrix_free::{IdentityPrecond, InitialGuessStatus, LinOp, Precond};
 use faer::prelude::*;
 use faer::sparse::{SparseColMat, Triplet};
 use faer::{Mat, MatMut, MatRef, Par};
+use faer::reborrow::ReborrowMut;
 use nalgebra::Matrix3;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
@@ -486,6 +487,22 @@ impl AdjointOperator<'_> {
     }
 }
 
+// A node-major 3m column and a slice of `Vec3` share one layout: nalgebra's `Vector3<f64>` is
+// `repr(C)` over `[f64; 3]`. Viewing in place avoids two copies per Krylov iteration.
+const _: () = assert!(std::mem::size_of::<Vec3>() == 24 && std::mem::align_of::<Vec3>() == 8);
+
+fn col_as_nodes(c: faer::ColRef<'_, f64>) -> Option<&[Vec3]> {
+    let s = c.try_as_col_major()?.as_slice();
+    // SAFETY: same size and alignment (checked above); the length is a multiple of 3.
+    (s.len() % 3 == 0).then(|| unsafe { std::slice::from_raw_parts(s.as_ptr() as *const Vec3, s.len() / 3) })
+}
+
+fn col_as_nodes_mut(c: faer::ColMut<'_, f64>) -> Option<&mut [Vec3]> {
+    let s = c.try_as_col_major_mut()?.as_slice_mut();
+    // SAFETY: as in `col_as_nodes`; the mutable borrow is unique.
+    (s.len() % 3 == 0).then(|| unsafe { std::slice::from_raw_parts_mut(s.as_mut_ptr() as *mut Vec3, s.len() / 3) })
+}
+
 impl LinOp<f64> for AdjointOperator<'_> {
     fn apply_scratch(&self, _rhs_ncols: usize, _par: Par) -> StackReq {
         StackReq::EMPTY
@@ -497,6 +514,12 @@ impl LinOp<f64> for AdjointOperator<'_> {
         3 * self.sim.num_nodes()
     }
     fn apply(&self, mut out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, _par: Par, _stack: &mut MemStack) {
+        if rhs.ncols() == 1 {
+            if let (Some(v), Some(o)) = (col_as_nodes(rhs.col(0)), col_as_nodes_mut(out.rb_mut().col_mut(0))) {
+                self.apply_nodes(v, o);
+                return;
+            }
+        }
         let mut guard = self.buffers.lock().expect("operator buffers");
         let (v, hv) = &mut *guard;
         for k in 0..rhs.ncols() {
@@ -540,6 +563,17 @@ impl LinOp<f64> for PdPreconditioner<'_> {
     fn apply(&self, mut out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, _par: Par, stack: &mut MemStack) {
         let n = self.factor.dim();
         for k in 0..rhs.ncols() {
+            // In place: copy the column, then solve on its node-major n x 3 strided view.
+            if let Some(col) = out.rb_mut().col_mut(k).try_as_col_major_mut() {
+                let dst = col.as_slice_mut();
+                for (i, d) in dst.iter_mut().enumerate() {
+                    *d = rhs[(i, k)];
+                }
+                // SAFETY: dst holds 3n contiguous values; rows step by 3, columns by 1.
+                let view = unsafe { MatMut::from_raw_parts_mut(dst.as_mut_ptr(), n, 3, 3isize, 1isize) };
+                self.factor.solve_columns(view, stack);
+                continue;
+            }
             let mut cols = Mat::<f64>::zeros(n, 3);
             for i in 0..n {
                 for d in 0..3 {
