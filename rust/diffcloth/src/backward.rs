@@ -106,8 +106,9 @@ struct Resume {
     grads: Gradients,
     carry_x: Vec<Vec3>,
     carry_v: Vec<Vec3>,
-    /// The last adjoint, warm start of the next solve.
+    /// The last two adjoints, the warm start of the next solve.
     z: Vec<Vec3>,
+    z_previous: Option<Vec<Vec3>>,
 }
 
 /// Recorded steps whose PD residual is above this are flagged: the adjoint assumes the step is
@@ -639,8 +640,8 @@ impl Simulator {
             let mut carry = None;
             match self.backward_segments(tape, &[(cp.step, &records[..])], dl_dx, dl_dv, options, state.take(), &mut carry) {
                 Ok(g) => {
-                    let (carry_x, carry_v, z) = carry.expect("set on success");
-                    state = Some(Resume { grads: g, carry_x, carry_v, z });
+                    let (carry_x, carry_v, z, z_previous) = carry.expect("set on success");
+                    state = Some(Resume { grads: g, carry_x, carry_v, z, z_previous });
                 }
                 Err(e) => {
                     outcome = Err(e);
@@ -682,7 +683,7 @@ impl Simulator {
         dl_dv: &[Vec<Vec3>],
         options: &BackwardOptions,
         resume: Option<Resume>,
-        carry_out: &mut Option<(Vec<Vec3>, Vec<Vec3>, Vec<Vec3>)>,
+        carry_out: &mut Option<(Vec<Vec3>, Vec<Vec3>, Vec<Vec3>, Option<Vec<Vec3>>)>,
     ) -> Result<Gradients> {
         let steps = tape.len();
         let n = self.num_nodes();
@@ -701,7 +702,7 @@ impl Simulator {
         }
         let h = self.params().h;
         let mass = self.masses();
-        let Resume { mut grads, mut carry_x, mut carry_v, mut z } = resume.unwrap_or_else(|| Resume {
+        let Resume { mut grads, mut carry_x, mut carry_v, mut z, z_previous } = resume.unwrap_or_else(|| Resume {
             grads: Gradients {
                 mu_obstacles: vec![0.0; self.obstacles().len()],
                 attachment_targets: vec![Vec::new(); steps],
@@ -712,8 +713,11 @@ impl Simulator {
             carry_x: vec![Vec3::zeros(); n],
             carry_v: vec![Vec3::zeros(); n],
             z: vec![Vec3::zeros(); n],
+            z_previous: None,
         });
         let mut rhs = vec![Vec3::zeros(); n];
+        let mut have_previous = z_previous.is_some();
+        let mut z_previous = z_previous.unwrap_or_else(|| z.clone());
         let mut op = AdjointOperator {
             sim: self,
             lin: Linearization::new(self),
@@ -747,6 +751,17 @@ impl Simulator {
                 op.coupling = ContactCoupling::new(&op.contacts, n)?;
                 grads.profile.dr += t_dr.elapsed();
                 let t_solve = Instant::now();
+                // Warm start: extrapolate the last two adjoints (consecutive steps vary smoothly).
+                if have_previous {
+                    for i in 0..n {
+                        let zi = z[i];
+                        z[i] = 2.0 * zi - z_previous[i];
+                        z_previous[i] = zi;
+                    }
+                } else {
+                    z_previous.copy_from_slice(&z);
+                }
+                have_previous = true;
                 grads.steps[k] = self.solve_adjoint(&op, &rhs, &mut z, options, &mut scratch)?;
                 grads.profile.solve += t_solve.elapsed();
                 let (zeta, frame_x) = self.accumulate(rec, &op.contacts, &op.coupling, &z, &mut grads, k);
@@ -761,7 +776,7 @@ impl Simulator {
         }
         grads.x0 = carry_x.clone();
         grads.v0 = carry_v.clone();
-        *carry_out = Some((carry_x, carry_v, z));
+        *carry_out = Some((carry_x, carry_v, z, have_previous.then_some(z_previous)));
         grads.warnings.clear();
         if !grads.loose_steps.is_empty() {
             let worst = grads.loose_steps.iter().map(|&(_, r)| r).fold(0.0, f64::max);
