@@ -432,3 +432,28 @@ fn checkpointed_and_full_tapes_give_identical_gradients() {
     }
     assert!(ckpt_bytes * 3 < full_bytes, "checkpointed {ckpt_bytes} B vs full {full_bytes} B");
 }
+
+/// The sock: a closed tube with a heel bend (curved rest shape), held at its four rim handles.
+#[test]
+fn gradients_match_finite_differences_on_the_sock() {
+    let mut cfg = load_config("sock");
+    cfg.effects.retain(|e| !matches!(e, Effect::ObstacleContact | Effect::Friction | Effect::SelfCollision));
+    cfg.obstacles.clear();
+    cfg.self_collision = None;
+    cfg.contact = None;
+    cfg.solver.tolerance = 0.0;
+    cfg.solver.max_iterations = 400;
+    let mut sim = Simulator::new(&cfg).unwrap();
+    let steps = 4;
+    let n = sim.num_nodes();
+    let t0 = sim.attachment_targets().to_vec();
+    let base = Rollout {
+        x0: sim.positions().to_vec(),
+        v0: random_vectors(n, 0.3, 15),
+        targets: (0..steps).map(|k| t0.iter().map(|t| t + Vec3::new(0.0, 0.01, 0.02) * k as f64).collect()).collect(),
+        forces: vec![Vec::new(); steps],
+        params: sim.params().clone(),
+        mu: None,
+    };
+    check_all_gradients(&mut sim, &base, steps, &[AdjointSolver::Direct, AdjointSolver::Krylov], 1.0);
+}
