@@ -596,6 +596,18 @@ impl LinOp<f64> for PdPreconditioner<'_> {
 
 impl Precond<f64> for PdPreconditioner<'_> {}
 
+/// Nodes as one node-major 3m column.
+fn nodes_to_col(v: &[Vec3]) -> Mat<f64> {
+    Mat::from_fn(3 * v.len(), 1, |r, _| v[r / 3][r % 3])
+}
+
+/// A node-major 3m column back into nodes.
+fn col_to_nodes(c: &Mat<f64>, out: &mut [Vec3]) {
+    for (i, o) in out.iter_mut().enumerate() {
+        *o = Vec3::new(c[(3 * i, 0)], c[(3 * i + 1, 0)], c[(3 * i + 2, 0)]);
+    }
+}
+
 fn norm(v: &[Vec3]) -> f64 {
     v.iter().map(|x| x.norm_squared()).sum::<f64>().sqrt()
 }
@@ -879,19 +891,12 @@ impl Simulator {
 
     fn krylov(&self, op: &AdjointOperator<'_>, g: &[Vec3], z: &mut [Vec3], options: &BackwardOptions, scratch: &mut MemBuffer) -> Option<usize> {
         let n = g.len();
-        let mut rhs = Mat::<f64>::zeros(3 * n, 1);
-        for i in 0..n {
-            for d in 0..3 {
-                rhs[(3 * i + d, 0)] = g[i][d];
-            }
+        let rhs = nodes_to_col(g);
+        // Warm start from the previous (later) steps' adjoints: consecutive adjoints are close.
+        if !z.iter().all(|v| v.iter().all(|c| c.is_finite())) {
+            z.iter_mut().for_each(|v| *v = Vec3::zeros());
         }
-        // Warm start from the previous (later) step's adjoint: consecutive adjoints are close.
-        let mut out = Mat::<f64>::zeros(3 * n, 1);
-        for i in 0..n {
-            for d in 0..3 {
-                out[(3 * i + d, 0)] = if z[i][d].is_finite() { z[i][d] } else { 0.0 };
-            }
-        }
+        let mut out = nodes_to_col(z);
         // Without active contacts H = P - dP is symmetric: preconditioned CG needs one operator
         // and one preconditioner application per iteration (BiCGStab two of each). CG reports
         // an indefinite H (possible away from the converged solution); BiCGStab then takes over.
@@ -912,9 +917,7 @@ impl Simulator {
                 MemStack::new(scratch),
             );
             if let Ok(info) = result {
-                for i in 0..n {
-                    z[i] = Vec3::new(cg_out[(3 * i, 0)], cg_out[(3 * i + 1, 0)], cg_out[(3 * i + 2, 0)]);
-                }
+                col_to_nodes(&cg_out, z);
                 return Some(info.iter_count);
             }
         }
@@ -936,9 +939,7 @@ impl Simulator {
             Par::Seq,
             MemStack::new(scratch),
         );
-        for i in 0..n {
-            z[i] = Vec3::new(out[(3 * i, 0)], out[(3 * i + 1, 0)], out[(3 * i + 2, 0)]);
-        }
+        col_to_nodes(&out, z);
         result.ok().map(|info| info.iter_count)
     }
 
@@ -981,16 +982,9 @@ impl Simulator {
         let h = SparseColMat::<usize, f64>::try_new_from_triplets(3 * n, 3 * n, &triplets)
             .map_err(|e| Error::Solver(format!("cannot assemble the adjoint matrix: {e:?}")))?;
         let lu = h.sp_lu().map_err(|e| Error::Solver(format!("adjoint matrix is singular: {e:?}")))?;
-        let mut rhs = Mat::<f64>::zeros(3 * n, 1);
-        for i in 0..n {
-            for d in 0..3 {
-                rhs[(3 * i + d, 0)] = g[i][d];
-            }
-        }
+        let mut rhs = nodes_to_col(g);
         lu.solve_in_place(rhs.as_mut());
-        for i in 0..n {
-            z[i] = Vec3::new(rhs[(3 * i, 0)], rhs[(3 * i + 1, 0)], rhs[(3 * i + 2, 0)]);
-        }
+        col_to_nodes(&rhs, z);
         Ok(())
     }
 

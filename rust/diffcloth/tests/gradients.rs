@@ -205,10 +205,9 @@ max_iterations = 20000
     check_all_gradients(&mut sim, &base, steps, &[AdjointSolver::Direct, AdjointSolver::Krylov, AdjointSolver::FixedPoint], 1.0);
 }
 
-/// The hat's curved rest shape makes the bending projection Jacobian non-zero.
-#[test]
-fn gradients_match_finite_differences_on_the_hat() {
-    let mut cfg = load_config("hat");
+/// A shipped garment scene without its contact effects, solved with a fixed iteration count.
+fn contact_free_garment(name: &str, iterations: usize) -> Simulator {
+    let mut cfg = load_config(name);
     cfg.effects.retain(|e| !matches!(e, Effect::ObstacleContact | Effect::Friction | Effect::SelfCollision));
     cfg.obstacles.clear();
     cfg.self_collision = None;
@@ -216,8 +215,14 @@ fn gradients_match_finite_differences_on_the_hat() {
     // A fixed iteration count (no stopping test): the solution is then a smooth function of
     // the inputs, which keeps the finite differences free of stopping-rule noise.
     cfg.solver.tolerance = 0.0;
-    cfg.solver.max_iterations = 600;
-    let mut sim = Simulator::new(&cfg).unwrap();
+    cfg.solver.max_iterations = iterations;
+    Simulator::new(&cfg).unwrap()
+}
+
+/// The hat's curved rest shape makes the bending projection Jacobian non-zero.
+#[test]
+fn gradients_match_finite_differences_on_the_hat() {
+    let mut sim = contact_free_garment("hat", 600);
     let steps = 6;
     let n = sim.num_nodes();
     let t0 = sim.attachment_targets().to_vec();
@@ -403,7 +408,7 @@ fn checkpointed_and_full_tapes_give_identical_gradients() {
     let steps = 23;
     let n = sim.num_nodes();
     let w: Vec<Vec<Vec3>> = (0..steps).map(|k| random_vectors(n, 1.0, 500 + k as u64)).collect();
-    let mut run = |sim: &mut Simulator, every: Option<usize>| {
+    let run = |sim: &mut Simulator, every: Option<usize>| {
         match every {
             Some(e) => sim.set_recording_checkpointed(e),
             None => sim.set_recording(true),
@@ -436,14 +441,7 @@ fn checkpointed_and_full_tapes_give_identical_gradients() {
 /// The sock: a closed tube with a heel bend (curved rest shape), held at its four rim handles.
 #[test]
 fn gradients_match_finite_differences_on_the_sock() {
-    let mut cfg = load_config("sock");
-    cfg.effects.retain(|e| !matches!(e, Effect::ObstacleContact | Effect::Friction | Effect::SelfCollision));
-    cfg.obstacles.clear();
-    cfg.self_collision = None;
-    cfg.contact = None;
-    cfg.solver.tolerance = 0.0;
-    cfg.solver.max_iterations = 400;
-    let mut sim = Simulator::new(&cfg).unwrap();
+    let mut sim = contact_free_garment("sock", 400);
     let steps = 4;
     let n = sim.num_nodes();
     let t0 = sim.attachment_targets().to_vec();
