@@ -197,7 +197,8 @@ class Simulator:
         back to ``"direct"`` and are counted in ``fell_back``.
 
         Returns numpy arrays ``x0``, ``v0`` (n, 3); per step lists ``attachment_targets`` and
-        ``external_forces``; scalars ``k_stretch``, ``k_bend``, ``k_attach``, ``density``,
+        ``external_forces`` (and ``external_forces_constant``, the gradient for a force held
+        constant over the rollout, or None); scalars ``k_stretch``, ``k_bend``, ``k_attach``, ``density``,
         ``wind_omega``, ``wind_phi``, ``mu_self``; ``mu_obstacles`` (one per obstacle); 3-lists
         ``gravity``, ``wind_direction``; per-step solver
         stats ``iterations``, ``fell_back``, ``residual``; a stage ``profile``; and ``warnings``:
@@ -218,6 +219,9 @@ class Simulator:
         out = self._core.backward(grads("dl_dx", dl_dx), grads("dl_dv", dl_dv), solver, float(tolerance), int(max_iterations))
         out["attachment_targets"] = [np.asarray(a) for a in out["attachment_targets"]]
         out["external_forces"] = [np.asarray(a) for a in out["external_forces"]]
+        # A force held constant over the rollout: the sum of the per-step gradients.
+        per_step = [a for a in out["external_forces"] if a.size]
+        out["external_forces_constant"] = np.sum(per_step, axis=0) if per_step else None
         return out
 
     def set_obstacle_mu(self, index: int, mu: float) -> None:

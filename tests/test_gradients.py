@@ -58,6 +58,12 @@ def test_backward_matches_finite_differences(solver):
     plus = rollout(sim, v0, targets, [f + 1e-3 * df for f, df in zip(forces, forces_dir)], weights)
     minus = rollout(sim, v0, targets, [f - 1e-3 * df for f, df in zip(forces, forces_dir)], weights)
     assert abs(analytic - (plus - minus) / 2e-3) <= 1e-5 * abs(analytic)
+    # The same perturbation at every step: the time-invariant force gradient.
+    d0 = forces_dir[0]
+    analytic = np.sum(g["external_forces_constant"] * d0)
+    plus = rollout(sim, v0, targets, [f + 1e-3 * d0 for f in forces], weights)
+    minus = rollout(sim, v0, targets, [f - 1e-3 * d0 for f in forces], weights)
+    assert abs(analytic - (plus - minus) / 2e-3) <= 1e-5 * abs(analytic)
 
 
 def test_backward_errors():
