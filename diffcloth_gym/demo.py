@@ -1,4 +1,5 @@
-"""The main job (for now): simulate the Wind scene and write a picture of its motion.
+"""The main job (for now): simulate a scene (default: a cloth dropped on a sphere, with dry
+friction and self-collision) and write a picture of its motion.
 
 Run with ``scripts/demo`` (or ``python -m diffcloth_gym.demo``). The hat-controller comparison
 replaces this once the environments and gradients exist.
@@ -15,7 +16,7 @@ import numpy as np
 
 def main(argv: list[str] | None = None) -> Path:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--scene", default="wind", help="scene name in configs/ or a TOML path")
+    parser.add_argument("--scene", default="sphere", help="scene name in configs/ or a TOML path")
     parser.add_argument("--steps", type=int, default=None, help="steps (default: the scene's)")
     parser.add_argument("--out", default="out/demo.png", help="picture to write")
     args = parser.parse_args(argv)
@@ -51,6 +52,13 @@ def main(argv: list[str] | None = None) -> Path:
         x = frames[i]
         # Matplotlib's z is up; our y is up.
         ax.plot_trisurf(x[:, 0], x[:, 2], x[:, 1], triangles=tris, color="tab:blue", alpha=0.85, linewidth=0.2, edgecolor="k")
+        for obstacle in sim.config.get("obstacles", []):
+            shape = obstacle["shape"]
+            if shape["kind"] == "sphere":
+                u, w = np.meshgrid(np.linspace(0, 2 * np.pi, 24), np.linspace(0, np.pi, 12))
+                c, r = shape["center"], shape["radius"]
+                ax.plot_surface(c[0] + r * np.cos(u) * np.sin(w), c[2] + r * np.sin(u) * np.sin(w),
+                                c[1] + r * np.cos(w), color="tab:orange", alpha=0.35, linewidth=0)
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[2], hi[2])
         ax.set_zlim(lo[1], hi[1])
