@@ -867,7 +867,7 @@ impl Simulator {
         let mut growing = 0;
         for it in 0..=options.max_iterations {
             op.apply_nodes(z, &mut hz);
-            let residual = norm(&g.iter().zip(&hz).map(|(a, b)| a - b).collect::<Vec<_>>()) / g_norm;
+            let residual = g.iter().zip(&hz).map(|(a, b)| (a - b).norm_squared()).sum::<f64>().sqrt() / g_norm;
             if !residual.is_finite() {
                 return None;
             }

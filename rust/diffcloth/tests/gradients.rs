@@ -331,22 +331,29 @@ fn backward_without_a_tape_is_an_error() {
     assert!(sim.backward(&[], &[], &BackwardOptions::default()).unwrap_err().to_string().contains("tape"));
 }
 
-/// Self-contact: a square sliding over another square held by springs. Each top node touches
-/// the node below it (pair normal from their separation) and slips.
-#[test]
-fn gradients_through_self_contact_match_finite_differences() {
-    let dir = std::env::temp_dir().join(format!("diffcloth_pairs_{}", std::process::id()));
+/// Writes two separate 0.3 m squares (nodes 0-3 at `bottom`, 4-7 at `top`) as an OBJ file in
+/// a fresh temporary folder; returns (folder, file).
+fn two_squares_obj(tag: &str, bottom: f64, top: f64) -> (std::path::PathBuf, std::path::PathBuf) {
+    let dir = std::env::temp_dir().join(format!("diffcloth_{tag}_{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let obj = dir.join("two_squares.obj");
-    // Bottom square at y = 0, top square at y = 0.062 (contact radius 0.06).
     let mut text = String::new();
-    for y in [0.0, 0.062] {
+    for y in [bottom, top] {
         for (x, z) in [(0.0, 0.0), (0.3, 0.0), (0.3, 0.3), (0.0, 0.3)] {
             text += &format!("v {x} {y} {z}\n");
         }
     }
     text += "f 1 2 3\nf 1 3 4\nf 5 6 7\nf 5 7 8\n";
     std::fs::write(&obj, text).unwrap();
+    (dir, obj)
+}
+
+/// Self-contact: a square sliding over another square held by springs. Each top node touches
+/// the node below it (pair normal from their separation) and slips.
+#[test]
+fn gradients_through_self_contact_match_finite_differences() {
+    // Bottom square at y = 0, top square at y = 0.062 (contact radius 0.06).
+    let (dir, obj) = two_squares_obj("pairs", 0.0, 0.062);
     let mut sim = sim_from_toml(&format!(
         r#"
 h = 0.01
@@ -461,17 +468,7 @@ fn gradients_match_finite_differences_on_the_sock() {
 /// jointly (projected Gauss-Seidel) and linearized jointly in the adjoint.
 #[test]
 fn gradients_through_coupled_contacts_match_finite_differences() {
-    let dir = std::env::temp_dir().join(format!("diffcloth_coupled_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let obj = dir.join("two_squares.obj");
-    let mut text = String::new();
-    for y in [0.01, 0.072] {
-        for (x, z) in [(0.0, 0.0), (0.3, 0.0), (0.3, 0.3), (0.0, 0.3)] {
-            text += &format!("v {x} {y} {z}\n");
-        }
-    }
-    text += "f 1 2 3\nf 1 3 4\nf 5 6 7\nf 5 7 8\n";
-    std::fs::write(&obj, text).unwrap();
+    let (dir, obj) = two_squares_obj("coupled", 0.01, 0.072);
     let mut sim = sim_from_toml(&format!(
         r#"
 h = 0.01
