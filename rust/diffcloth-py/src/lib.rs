@@ -1,7 +1,10 @@
 //! Thin Python binding (`diffcloth_gym._core`): converts arrays, maps errors to the exception
 //! tree in `diffcloth_gym.errors`, releases the GIL for long calls. No physics here.
 
-use diffcloth::{AdjointSolver, BackwardOptions, Branch, ContactKind, Error, Params, SceneConfig, Simulator, SolverSettings, StepInput, StepStats, Vec3};
+use diffcloth::{
+    AdjointSolver, BackwardOptions, Branch, ContactKind, Error, Params, SceneConfig, Simulator,
+    SolverSettings, StepInput, StepStats, Vec3,
+};
 use numpy::{PyArray2, PyReadonlyArray2, ToPyArray};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -25,15 +28,24 @@ fn to_py_err(py: Python<'_>, err: Error) -> PyErr {
 }
 
 fn raise(py: Python<'_>, class: &str, message: String) -> PyErr {
-    match py.import("diffcloth_gym.errors").and_then(|m| m.getattr(class)) {
-        Ok(ty) => PyErr::from_type(ty.cast_into().expect("errors are exception classes"), message),
+    match py
+        .import("diffcloth_gym.errors")
+        .and_then(|m| m.getattr(class))
+    {
+        Ok(ty) => PyErr::from_type(
+            ty.cast_into().expect("errors are exception classes"),
+            message,
+        ),
         Err(_) => PyValueError::new_err(message),
     }
 }
 
 /// Runs core code without the GIL; a panic (a bug, never bad input) becomes `InternalError`
 /// instead of tearing down the interpreter.
-fn guarded<T: Send>(py: Python<'_>, f: impl FnOnce() -> diffcloth::Result<T> + Send) -> PyResult<T> {
+fn guarded<T: Send>(
+    py: Python<'_>,
+    f: impl FnOnce() -> diffcloth::Result<T> + Send,
+) -> PyResult<T> {
     match py.detach(|| catch_unwind(AssertUnwindSafe(f))) {
         Ok(Ok(v)) => Ok(v),
         Ok(Err(e)) => Err(to_py_err(py, e)),
@@ -43,7 +55,11 @@ fn guarded<T: Send>(py: Python<'_>, f: impl FnOnce() -> diffcloth::Result<T> + S
                 .cloned()
                 .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
                 .unwrap_or_else(|| "unknown panic".into());
-            Err(raise(py, "InternalError", format!("internal error in the simulator (please report): {msg}")))
+            Err(raise(
+                py,
+                "InternalError",
+                format!("internal error in the simulator (please report): {msg}"),
+            ))
         }
     }
 }
@@ -52,15 +68,24 @@ fn guarded<T: Send>(py: Python<'_>, f: impl FnOnce() -> diffcloth::Result<T> + S
 fn read_nodes(py: Python<'_>, name: &str, a: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<Vec3>> {
     let shape = a.as_array().shape().to_vec();
     if shape.len() != 2 || shape[1] != 3 {
-        return Err(raise(py, "InputError", format!("{name} must have shape (n, 3), got {shape:?}")));
+        return Err(raise(
+            py,
+            "InputError",
+            format!("{name} must have shape (n, 3), got {shape:?}"),
+        ));
     }
     let view = a.as_array();
-    Ok(view.outer_iter().map(|r| Vec3::new(r[0], r[1], r[2])).collect())
+    Ok(view
+        .outer_iter()
+        .map(|r| Vec3::new(r[0], r[1], r[2]))
+        .collect())
 }
 
 fn nodes_to_py<'py>(py: Python<'py>, nodes: &[Vec3]) -> Bound<'py, PyArray2<f64>> {
     let flat: Vec<f64> = nodes.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
-    numpy::ndarray::Array2::from_shape_vec((nodes.len(), 3), flat).expect("n x 3").to_pyarray(py)
+    numpy::ndarray::Array2::from_shape_vec((nodes.len(), 3), flat)
+        .expect("n x 3")
+        .to_pyarray(py)
 }
 
 fn stats_dict<'py>(py: Python<'py>, s: StepStats) -> PyResult<Bound<'py, PyDict>> {
@@ -88,13 +113,21 @@ impl PySimulator {
     fn from_json(py: Python<'_>, config_json: &str, base_dir: &str) -> PyResult<Self> {
         let inner = guarded(py, || {
             diffcloth::init_linear_algebra();
-            Simulator::new(&SceneConfig::from_json_str(config_json, Path::new(base_dir))?)
+            Simulator::new(&SceneConfig::from_json_str(
+                config_json,
+                Path::new(base_dir),
+            )?)
         })?;
         Ok(Self { inner })
     }
 
     #[pyo3(signature = (x=None, v=None))]
-    fn reset(&mut self, py: Python<'_>, x: Option<PyReadonlyArray2<'_, f64>>, v: Option<PyReadonlyArray2<'_, f64>>) -> PyResult<()> {
+    fn reset(
+        &mut self,
+        py: Python<'_>,
+        x: Option<PyReadonlyArray2<'_, f64>>,
+        v: Option<PyReadonlyArray2<'_, f64>>,
+    ) -> PyResult<()> {
         let x = x.map(|a| read_nodes(py, "x", &a)).transpose()?;
         let v = v.map(|a| read_nodes(py, "v", &a)).transpose()?;
         let sim = &mut self.inner;
@@ -110,13 +143,20 @@ impl PySimulator {
         external_forces: Option<PyReadonlyArray2<'_, f64>>,
         steps: usize,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let targets = attachment_targets.map(|a| read_nodes(py, "attachment_targets", &a)).transpose()?;
-        let forces = external_forces.map(|a| read_nodes(py, "external_forces", &a)).transpose()?;
+        let targets = attachment_targets
+            .map(|a| read_nodes(py, "attachment_targets", &a))
+            .transpose()?;
+        let forces = external_forces
+            .map(|a| read_nodes(py, "external_forces", &a))
+            .transpose()?;
         let sim = &mut self.inner;
         let stats = guarded(py, || {
             let mut last = StepStats::default();
             for _ in 0..steps {
-                last = sim.step(StepInput { attachment_targets: targets.as_deref(), external_forces: forces.as_deref() })?;
+                last = sim.step(StepInput {
+                    attachment_targets: targets.as_deref(),
+                    external_forces: forces.as_deref(),
+                })?;
             }
             Ok(last)
         })?;
@@ -139,7 +179,9 @@ impl PySimulator {
     fn triangles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> {
         let t = &self.inner.mesh().triangles;
         let flat: Vec<i64> = t.iter().flat_map(|t| t.map(|i| i as i64)).collect();
-        numpy::ndarray::Array2::from_shape_vec((t.len(), 3), flat).expect("t x 3").to_pyarray(py)
+        numpy::ndarray::Array2::from_shape_vec((t.len(), 3), flat)
+            .expect("t x 3")
+            .to_pyarray(py)
     }
     #[getter]
     fn masses(&self) -> Vec<f64> {
@@ -202,13 +244,14 @@ impl PySimulator {
             for (key, value) in kwargs.iter() {
                 let key: String = key.extract()?;
                 let vec3 = |v: &Bound<'_, PyAny>| -> PyResult<Vec3> {
-                    let a: [f64; 3] = v
-                        .extract()
-                        .map_err(|_| raise(py, "ParameterError", format!("{key} must be 3 numbers")))?;
+                    let a: [f64; 3] = v.extract().map_err(|_| {
+                        raise(py, "ParameterError", format!("{key} must be 3 numbers"))
+                    })?;
                     Ok(Vec3::from(a))
                 };
                 let scalar = |v: &Bound<'_, PyAny>| -> PyResult<f64> {
-                    v.extract().map_err(|_| raise(py, "ParameterError", format!("{key} must be a number")))
+                    v.extract()
+                        .map_err(|_| raise(py, "ParameterError", format!("{key} must be a number")))
                 };
                 match key.as_str() {
                     "h" => p.h = scalar(&value)?,
@@ -309,7 +352,8 @@ impl PySimulator {
     /// 2 slip), impulse (k, 3) on node_a in N s.
     fn contacts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let cs = self.inner.contacts();
-        let (mut a, mut b, mut o, mut gap, mut mu, mut branch) = (vec![], vec![], vec![], vec![], vec![], vec![]);
+        let (mut a, mut b, mut o, mut gap, mut mu, mut branch) =
+            (vec![], vec![], vec![], vec![], vec![], vec![]);
         let (mut normal, mut impulse) = (vec![], vec![]);
         for c in cs {
             match c.kind {
@@ -350,9 +394,21 @@ impl PySimulator {
     fn obstacle_distance(&self, py: Python<'_>, index: usize) -> PyResult<Vec<f64>> {
         let obstacles = self.inner.obstacles();
         let Some(o) = obstacles.get(index) else {
-            return Err(raise(py, "InputError", format!("obstacle {index} does not exist ({} obstacles)", obstacles.len())));
+            return Err(raise(
+                py,
+                "InputError",
+                format!(
+                    "obstacle {index} does not exist ({} obstacles)",
+                    obstacles.len()
+                ),
+            ));
         };
-        Ok(self.inner.positions().iter().map(|p| o.query(p, self.inner.time()).0).collect())
+        Ok(self
+            .inner
+            .positions()
+            .iter()
+            .map(|p| o.query(p, self.inner.time()).0)
+            .collect())
     }
 
     /// Sets the friction coefficient of obstacle `index`.
@@ -371,9 +427,18 @@ impl PySimulator {
     /// checkpoint_every = K only every K-th state (plus each step's inputs) is kept and
     /// backward re-simulates segments.
     #[pyo3(signature = (on, checkpoint_every=None))]
-    fn set_recording(&mut self, py: Python<'_>, on: bool, checkpoint_every: Option<usize>) -> PyResult<()> {
+    fn set_recording(
+        &mut self,
+        py: Python<'_>,
+        on: bool,
+        checkpoint_every: Option<usize>,
+    ) -> PyResult<()> {
         match (on, checkpoint_every) {
-            (true, Some(0)) => Err(raise(py, "ParameterError", "checkpoint_every must be at least 1".into())),
+            (true, Some(0)) => Err(raise(
+                py,
+                "ParameterError",
+                "checkpoint_every must be at least 1".into(),
+            )),
             (true, Some(k)) => {
                 self.inner.set_recording_checkpointed(k);
                 Ok(())
@@ -402,42 +467,80 @@ impl PySimulator {
         tolerance: f64,
         max_iterations: usize,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let solver = match solver {
-            "direct" => AdjointSolver::Direct,
-            "krylov" => AdjointSolver::Krylov,
-            "fixed_point" => AdjointSolver::FixedPoint,
-            other => {
-                return Err(raise(py, "ParameterError", format!("solver must be \"direct\", \"krylov\" or \"fixed_point\", got {other:?}")))
-            }
-        };
-        let read = |name: &str, a: Option<numpy::PyReadonlyArray3<'_, f64>>| -> PyResult<Vec<Vec<Vec3>>> {
-            let Some(a) = a else { return Ok(Vec::new()) };
-            let v = a.as_array();
-            if v.shape()[2] != 3 {
-                return Err(raise(py, "InputError", format!("{name} must have shape (steps, n, 3), got {:?}", v.shape())));
-            }
-            Ok(v.outer_iter().map(|step| step.outer_iter().map(|r| Vec3::new(r[0], r[1], r[2])).collect()).collect())
-        };
+        let solver =
+            match solver {
+                "direct" => AdjointSolver::Direct,
+                "krylov" => AdjointSolver::Krylov,
+                "fixed_point" => AdjointSolver::FixedPoint,
+                other => return Err(raise(
+                    py,
+                    "ParameterError",
+                    format!(
+                        "solver must be \"direct\", \"krylov\" or \"fixed_point\", got {other:?}"
+                    ),
+                )),
+            };
+        let read =
+            |name: &str, a: Option<numpy::PyReadonlyArray3<'_, f64>>| -> PyResult<Vec<Vec<Vec3>>> {
+                let Some(a) = a else { return Ok(Vec::new()) };
+                let v = a.as_array();
+                if v.shape()[2] != 3 {
+                    return Err(raise(
+                        py,
+                        "InputError",
+                        format!("{name} must have shape (steps, n, 3), got {:?}", v.shape()),
+                    ));
+                }
+                Ok(v.outer_iter()
+                    .map(|step| {
+                        step.outer_iter()
+                            .map(|r| Vec3::new(r[0], r[1], r[2]))
+                            .collect()
+                    })
+                    .collect())
+            };
         let (gx, gv) = (read("dl_dx", dl_dx)?, read("dl_dv", dl_dv)?);
         let sim = &mut self.inner;
-        let options = BackwardOptions { solver, tolerance, max_iterations };
+        let options = BackwardOptions {
+            solver,
+            tolerance,
+            max_iterations,
+        };
         let g = guarded(py, || sim.backward(&gx, &gv, &options))?;
         let d = PyDict::new(py);
         d.set_item("x0", nodes_to_py(py, &g.x0))?;
         d.set_item("v0", nodes_to_py(py, &g.v0))?;
-        let per_step = |rows: &Vec<Vec<Vec3>>| -> Vec<Bound<'py, PyArray2<f64>>> { rows.iter().map(|r| nodes_to_py(py, r)).collect() };
+        let per_step = |rows: &Vec<Vec<Vec3>>| -> Vec<Bound<'py, PyArray2<f64>>> {
+            rows.iter().map(|r| nodes_to_py(py, r)).collect()
+        };
         d.set_item("attachment_targets", per_step(&g.attachment_targets))?;
         d.set_item("external_forces", per_step(&g.external_forces))?;
-        for (k, v) in [("k_stretch", g.k_stretch), ("k_bend", g.k_bend), ("k_attach", g.k_attach), ("density", g.density), ("wind_omega", g.wind_omega), ("wind_phi", g.wind_phi)] {
+        for (k, v) in [
+            ("k_stretch", g.k_stretch),
+            ("k_bend", g.k_bend),
+            ("k_attach", g.k_attach),
+            ("density", g.density),
+            ("wind_omega", g.wind_omega),
+            ("wind_phi", g.wind_phi),
+        ] {
             d.set_item(k, v)?;
         }
         d.set_item("mu_obstacles", g.mu_obstacles.clone())?;
         d.set_item("mu_self", g.mu_self)?;
         d.set_item("gravity", g.gravity.as_slice().to_vec())?;
         d.set_item("wind_direction", g.wind_direction.as_slice().to_vec())?;
-        d.set_item("iterations", g.steps.iter().map(|s| s.iterations).collect::<Vec<_>>())?;
-        d.set_item("fell_back", g.steps.iter().map(|s| s.fell_back).collect::<Vec<_>>())?;
-        d.set_item("residual", g.steps.iter().map(|s| s.residual).collect::<Vec<_>>())?;
+        d.set_item(
+            "iterations",
+            g.steps.iter().map(|s| s.iterations).collect::<Vec<_>>(),
+        )?;
+        d.set_item(
+            "fell_back",
+            g.steps.iter().map(|s| s.fell_back).collect::<Vec<_>>(),
+        )?;
+        d.set_item(
+            "residual",
+            g.steps.iter().map(|s| s.residual).collect::<Vec<_>>(),
+        )?;
         let prof = PyDict::new(py);
         prof.set_item("dp_s", g.profile.dp.as_secs_f64())?;
         prof.set_item("dr_s", g.profile.dr.as_secs_f64())?;
@@ -455,15 +558,23 @@ impl PySimulator {
 
     /// Principal stretches (s1 >= s2) of every triangle at the current state, shape (t, 2).
     fn principal_stretches<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let s = self.inner.stretch().map(|s| s.principal_stretches(self.inner.positions())).unwrap_or_default();
+        let s = self
+            .inner
+            .stretch()
+            .map(|s| s.principal_stretches(self.inner.positions()))
+            .unwrap_or_default();
         let flat: Vec<f64> = s.iter().flat_map(|&(a, b)| [a, b]).collect();
-        numpy::ndarray::Array2::from_shape_vec((s.len(), 2), flat).expect("t x 2").to_pyarray(py)
+        numpy::ndarray::Array2::from_shape_vec((s.len(), 2), flat)
+            .expect("t x 2")
+            .to_pyarray(py)
     }
 
     /// Writes the current state as an OBJ file.
     fn write_obj(&self, py: Python<'_>, path: &str) -> PyResult<()> {
         let sim = &self.inner;
-        guarded(py, || diffcloth::mesh::write_obj(Path::new(path), sim.mesh(), sim.positions()))
+        guarded(py, || {
+            diffcloth::mesh::write_obj(Path::new(path), sim.mesh(), sim.positions())
+        })
     }
 }
 

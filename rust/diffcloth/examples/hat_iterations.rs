@@ -4,14 +4,26 @@ use diffcloth::{Simulator, SolverSettings, StepInput};
 fn main() {
     diffcloth::init_linear_algebra();
     let scene = std::env::args().nth(1).unwrap_or_else(|| "hat".into());
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../configs/{scene}.toml"));
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join(format!("../../configs/{scene}.toml"));
     let mut sim = Simulator::from_toml_file(&path).unwrap();
     let s = sim.solver().clone();
-    sim.set_solver(SolverSettings { tolerance: 0.0, max_iterations: 200, anderson: false, parallel: std::env::var("PAR").is_ok(), ..s }).unwrap();
+    sim.set_solver(SolverSettings {
+        tolerance: 0.0,
+        max_iterations: 200,
+        anderson: false,
+        parallel: std::env::var("PAR").is_ok(),
+        ..s
+    })
+    .unwrap();
     for _ in 0..100 {
         sim.step(StepInput::default()).unwrap();
     }
-    println!("nodes {} factor (nnz, supernodal) {:?}", sim.num_nodes(), sim.factor_stats());
+    println!(
+        "nodes {} factor (nnz, supernodal) {:?}",
+        sim.num_nodes(),
+        sim.factor_stats()
+    );
     let p = sim.profile();
     let it = p.iterations as f64;
     println!(

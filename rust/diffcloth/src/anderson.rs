@@ -109,7 +109,11 @@ fn dot(a: &[Vec3], b: &[Vec3]) -> f64 {
 }
 
 /// In-place Cholesky solve of the leading `m x m` block; false if not positive definite.
-fn cholesky_solve(a: &mut [[f64; MAX_HISTORY]; MAX_HISTORY], b: &mut [f64; MAX_HISTORY], m: usize) -> bool {
+fn cholesky_solve(
+    a: &mut [[f64; MAX_HISTORY]; MAX_HISTORY],
+    b: &mut [f64; MAX_HISTORY],
+    m: usize,
+) -> bool {
     for j in 0..m {
         let mut d = a[j][j];
         for k in 0..j {
@@ -162,7 +166,11 @@ mod tests {
         };
         let solve = |accel: bool| {
             let mut aa = Anderson::new(6, n);
-            let (mut x, mut g, mut f) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n], vec![Vec3::zeros(); n]);
+            let (mut x, mut g, mut f) = (
+                vec![Vec3::zeros(); n],
+                vec![Vec3::zeros(); n],
+                vec![Vec3::zeros(); n],
+            );
             for it in 0..2000 {
                 map(&x, &mut g);
                 for i in 0..n {

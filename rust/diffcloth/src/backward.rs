@@ -16,12 +16,14 @@ use crate::tape::{StepRecord, Tape};
 use crate::Vec3;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::matrix_free::bicgstab::{bicgstab, bicgstab_scratch, BicgParams};
-use faer::matrix_free::conjugate_gradient::{conjugate_gradient, conjugate_gradient_scratch, CgParams};
+use faer::matrix_free::conjugate_gradient::{
+    conjugate_gradient, conjugate_gradient_scratch, CgParams,
+};
 use faer::matrix_free::{IdentityPrecond, InitialGuessStatus, LinOp, Precond};
 use faer::prelude::*;
+use faer::reborrow::ReborrowMut;
 use faer::sparse::{SparseColMat, Triplet};
 use faer::{Mat, MatMut, MatRef, Par};
-use faer::reborrow::ReborrowMut;
 use nalgebra::Matrix3;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
@@ -49,7 +51,11 @@ pub struct BackwardOptions {
 
 impl Default for BackwardOptions {
     fn default() -> Self {
-        Self { solver: AdjointSolver::Krylov, tolerance: 1e-10, max_iterations: 500 }
+        Self {
+            solver: AdjointSolver::Krylov,
+            tolerance: 1e-10,
+            max_iterations: 500,
+        }
     }
 }
 
@@ -172,7 +178,11 @@ impl Linearization {
         if let Some(bend) = sim.bend() {
             for (i, &center) in bend.centers().iter().enumerate() {
                 let (nbrs, coefs) = bend.stencil(i);
-                let dv: Vec3 = nbrs.iter().zip(coefs).map(|(&j, &c)| c * (v[j] - v[center])).sum();
+                let dv: Vec3 = nbrs
+                    .iter()
+                    .zip(coefs)
+                    .map(|(&j, &c)| c * (v[j] - v[center]))
+                    .sum();
                 let q = bend.weight(i) * (self.bend[i] * dv);
                 for (&j, &c) in nbrs.iter().zip(coefs) {
                     out[j] -= c * q;
@@ -183,7 +193,11 @@ impl Linearization {
     }
 
     /// Triplets of `H = P_s (x) I_3 - dP` (3m x 3m) for the direct solver.
-    fn assemble(&self, sim: &Simulator, p: &SparseColMat<usize, f64>) -> Vec<Triplet<usize, usize, f64>> {
+    fn assemble(
+        &self,
+        sim: &Simulator,
+        p: &SparseColMat<usize, f64>,
+    ) -> Vec<Triplet<usize, usize, f64>> {
         let mut t = Vec::new();
         let pr = p.as_ref();
         for col in 0..pr.ncols() {
@@ -217,8 +231,9 @@ impl Linearization {
             for (i, &center) in bend.centers().iter().enumerate() {
                 let (nbrs, coefs) = bend.stencil(i);
                 let center_coef: f64 = -coefs.iter().sum::<f64>();
-                let nodes: Vec<(usize, f64)> =
-                    std::iter::once((center, center_coef)).chain(nbrs.iter().copied().zip(coefs.iter().copied())).collect();
+                let nodes: Vec<(usize, f64)> = std::iter::once((center, center_coef))
+                    .chain(nbrs.iter().copied().zip(coefs.iter().copied()))
+                    .collect();
                 let jw = bend.weight(i) * self.bend[i];
                 for &(a, ca) in &nodes {
                     for &(b, cb) in &nodes {
@@ -288,7 +303,8 @@ fn linearize_contacts(sim: &Simulator, rec: &StepRecord) -> Result<Vec<ContactLi
             }
             ContactKind::SelfPair { a, b } => {
                 let dist = (rec.x_prev[a] - rec.x_prev[b]).norm();
-                let jac = (Matrix3::identity() - c.normal * c.normal.transpose()) / dist.max(f64::MIN_POSITIVE);
+                let jac = (Matrix3::identity() - c.normal * c.normal.transpose())
+                    / dist.max(f64::MIN_POSITIVE);
                 (
                     vec![(a, c.mass / mass[a]), (b, -c.mass / mass[b])],
                     vec![(a, 1.0), (b, -1.0)],
@@ -303,16 +319,23 @@ fn linearize_contacts(sim: &Simulator, rec: &StepRecord) -> Result<Vec<ContactLi
         let d = m * relative - c.impulse;
         let lambda = -(d.dot(&n) + m * c.gap / h);
         let (phi, dj_dlambda, dj_dn, dj_dmu) = match c.branch {
-            Branch::Stick => (-Matrix3::identity(), n, -(m * c.gap / h) * Matrix3::identity(), Vec3::zeros()),
+            Branch::Stick => (
+                -Matrix3::identity(),
+                n,
+                -(m * c.gap / h) * Matrix3::identity(),
+                Vec3::zeros(),
+            ),
             Branch::Slip => {
                 let d_t = d - d.dot(&n) * n;
                 let t = d_t.norm().max(f64::MIN_POSITIVE);
                 let a = d_t / t;
                 let proj_a = Matrix3::identity() - a * a.transpose();
                 let proj_n = Matrix3::identity() - n * n.transpose();
-                let phi = -n * n.transpose() + mu * a * n.transpose() - (mu * lambda / t) * proj_a * proj_n;
+                let phi = -n * n.transpose() + mu * a * n.transpose()
+                    - (mu * lambda / t) * proj_a * proj_n;
                 let da_dn = proj_a * (-(n * d.transpose()) - d.dot(&n) * Matrix3::identity()) / t;
-                let dj_dn = (n - mu * a) * (-d.transpose()) + lambda * (Matrix3::identity() - mu * da_dn);
+                let dj_dn =
+                    (n - mu * a) * (-d.transpose()) + lambda * (Matrix3::identity() - mu * da_dn);
                 (phi, n - mu * a, dj_dn, -lambda * a)
             }
             Branch::TakeOff => unreachable!("filtered above"),
@@ -385,7 +408,13 @@ impl ContactCoupling {
                     let t: f64 = contacts[cp]
                         .s
                         .iter()
-                        .filter_map(|&(k, s)| contacts[c].e.iter().find(|&&(kk, _)| kk == k).map(|&(_, e)| s * e))
+                        .filter_map(|&(k, s)| {
+                            contacts[c]
+                                .e
+                                .iter()
+                                .find(|&&(kk, _)| kk == k)
+                                .map(|&(_, e)| s * e)
+                        })
                         .sum();
                     if t != 0.0 {
                         let block = -t * contacts[cp].phi.transpose();
@@ -399,7 +428,9 @@ impl ContactCoupling {
             }
             let lu = m.lu();
             if !lu.is_invertible() {
-                return Err(Error::Solver("the coupled contact linearization is singular".into()));
+                return Err(Error::Solver(
+                    "the coupled contact linearization is singular".into(),
+                ));
             }
             groups.push((group, lu));
         }
@@ -414,10 +445,16 @@ impl ContactCoupling {
             for &c in group {
                 grouped[c] = true;
             }
-            let inv = lu.try_inverse().unwrap_or_else(|| nalgebra::DMatrix::identity(3 * group.len(), 3 * group.len()));
+            let inv = lu
+                .try_inverse()
+                .unwrap_or_else(|| nalgebra::DMatrix::identity(3 * group.len(), 3 * group.len()));
             out.push((group.clone(), inv));
         }
-        out.extend((0..contacts).filter(|&c| !grouped[c]).map(|c| (vec![c], nalgebra::DMatrix::identity(3, 3))));
+        out.extend(
+            (0..contacts)
+                .filter(|&c| !grouped[c])
+                .map(|c| (vec![c], nalgebra::DMatrix::identity(3, 3))),
+        );
         out
     }
 
@@ -466,7 +503,11 @@ impl AdjointOperator<'_> {
         let n = v.len();
         let h = self.sim.params().h;
         let mut u = vec![Vec3::zeros(); n];
-        let mut y: Vec<Vec3> = self.contacts.iter().map(|c| c.impulse_adjoint(v, h) * h).collect();
+        let mut y: Vec<Vec3> = self
+            .contacts
+            .iter()
+            .map(|c| c.impulse_adjoint(v, h) * h)
+            .collect();
         self.coupling.solve(&mut y);
         for (c, yc) in self.contacts.iter().zip(&y) {
             let w = c.phi.transpose() * yc;
@@ -495,13 +536,16 @@ const _: () = assert!(std::mem::size_of::<Vec3>() == 24 && std::mem::align_of::<
 fn col_as_nodes(c: faer::ColRef<'_, f64>) -> Option<&[Vec3]> {
     let s = c.try_as_col_major()?.as_slice();
     // SAFETY: same size and alignment (checked above); the length is a multiple of 3.
-    (s.len() % 3 == 0).then(|| unsafe { std::slice::from_raw_parts(s.as_ptr() as *const Vec3, s.len() / 3) })
+    (s.len() % 3 == 0)
+        .then(|| unsafe { std::slice::from_raw_parts(s.as_ptr() as *const Vec3, s.len() / 3) })
 }
 
 fn col_as_nodes_mut(c: faer::ColMut<'_, f64>) -> Option<&mut [Vec3]> {
     let s = c.try_as_col_major_mut()?.as_slice_mut();
     // SAFETY: as in `col_as_nodes`; the mutable borrow is unique.
-    (s.len() % 3 == 0).then(|| unsafe { std::slice::from_raw_parts_mut(s.as_mut_ptr() as *mut Vec3, s.len() / 3) })
+    (s.len() % 3 == 0).then(|| unsafe {
+        std::slice::from_raw_parts_mut(s.as_mut_ptr() as *mut Vec3, s.len() / 3)
+    })
 }
 
 impl LinOp<f64> for AdjointOperator<'_> {
@@ -514,9 +558,18 @@ impl LinOp<f64> for AdjointOperator<'_> {
     fn ncols(&self) -> usize {
         3 * self.sim.num_nodes()
     }
-    fn apply(&self, mut out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, _par: Par, _stack: &mut MemStack) {
+    fn apply(
+        &self,
+        mut out: MatMut<'_, f64>,
+        rhs: MatRef<'_, f64>,
+        _par: Par,
+        _stack: &mut MemStack,
+    ) {
         if rhs.ncols() == 1 {
-            if let (Some(v), Some(o)) = (col_as_nodes(rhs.col(0)), col_as_nodes_mut(out.rb_mut().col_mut(0))) {
+            if let (Some(v), Some(o)) = (
+                col_as_nodes(rhs.col(0)),
+                col_as_nodes_mut(out.rb_mut().col_mut(0)),
+            ) {
                 self.apply_nodes(v, o);
                 return;
             }
@@ -535,7 +588,13 @@ impl LinOp<f64> for AdjointOperator<'_> {
             }
         }
     }
-    fn conj_apply(&self, out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, par: Par, stack: &mut MemStack) {
+    fn conj_apply(
+        &self,
+        out: MatMut<'_, f64>,
+        rhs: MatRef<'_, f64>,
+        par: Par,
+        stack: &mut MemStack,
+    ) {
         self.apply(out, rhs, par, stack);
     }
 }
@@ -561,7 +620,13 @@ impl LinOp<f64> for PdPreconditioner<'_> {
     fn ncols(&self) -> usize {
         3 * self.factor.dim()
     }
-    fn apply(&self, mut out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, _par: Par, stack: &mut MemStack) {
+    fn apply(
+        &self,
+        mut out: MatMut<'_, f64>,
+        rhs: MatRef<'_, f64>,
+        _par: Par,
+        stack: &mut MemStack,
+    ) {
         let n = self.factor.dim();
         for k in 0..rhs.ncols() {
             // In place: copy the column, then solve on its node-major n x 3 strided view.
@@ -571,7 +636,8 @@ impl LinOp<f64> for PdPreconditioner<'_> {
                     *d = rhs[(i, k)];
                 }
                 // SAFETY: dst holds 3n contiguous values; rows step by 3, columns by 1.
-                let view = unsafe { MatMut::from_raw_parts_mut(dst.as_mut_ptr(), n, 3, 3isize, 1isize) };
+                let view =
+                    unsafe { MatMut::from_raw_parts_mut(dst.as_mut_ptr(), n, 3, 3isize, 1isize) };
                 self.factor.solve_columns(view, stack);
                 continue;
             }
@@ -589,7 +655,13 @@ impl LinOp<f64> for PdPreconditioner<'_> {
             }
         }
     }
-    fn conj_apply(&self, out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, par: Par, stack: &mut MemStack) {
+    fn conj_apply(
+        &self,
+        out: MatMut<'_, f64>,
+        rhs: MatRef<'_, f64>,
+        par: Par,
+        stack: &mut MemStack,
+    ) {
         self.apply(out, rhs, par, stack);
     }
 }
@@ -616,13 +688,28 @@ impl Simulator {
     /// Backpropagates a loss through the recorded steps. `dl_dx[n]` and `dl_dv[n]` are the
     /// loss gradients with respect to the positions and velocities after recorded step n
     /// (empty slices mean zero). Requires a tape (`set_recording(true)` before the rollout).
-    pub fn backward(&mut self, dl_dx: &[Vec<Vec3>], dl_dv: &[Vec<Vec3>], options: &BackwardOptions) -> Result<Gradients> {
+    pub fn backward(
+        &mut self,
+        dl_dx: &[Vec<Vec3>],
+        dl_dv: &[Vec<Vec3>],
+        options: &BackwardOptions,
+    ) -> Result<Gradients> {
         let start = Instant::now();
-        let tape = self.take_tape().ok_or_else(|| Error::Input("no tape: call set_recording(true) before the rollout".into()))?;
+        let tape = self.take_tape().ok_or_else(|| {
+            Error::Input("no tape: call set_recording(true) before the rollout".into())
+        })?;
         let result = if tape.checkpoint_every.is_some() {
             self.backward_checkpointed(&tape, dl_dx, dl_dv, options)
         } else {
-            self.backward_segments(&tape, &[(0, &tape.records[..])], dl_dx, dl_dv, options, None, &mut None)
+            self.backward_segments(
+                &tape,
+                &[(0, &tape.records[..])],
+                dl_dx,
+                dl_dv,
+                options,
+                None,
+                &mut None,
+            )
         };
         self.put_tape(Some(tape));
         result.map(|mut g| {
@@ -635,8 +722,19 @@ impl Simulator {
 
     /// Re-simulates each checkpointed segment (last first) and backpropagates through it;
     /// the simulator's state is restored afterwards.
-    fn backward_checkpointed(&mut self, tape: &Tape, dl_dx: &[Vec<Vec3>], dl_dv: &[Vec<Vec3>], options: &BackwardOptions) -> Result<Gradients> {
-        let saved = (self.positions().to_vec(), self.velocities().to_vec(), self.time(), self.attachment_targets().to_vec());
+    fn backward_checkpointed(
+        &mut self,
+        tape: &Tape,
+        dl_dx: &[Vec<Vec3>],
+        dl_dv: &[Vec<Vec3>],
+        options: &BackwardOptions,
+    ) -> Result<Gradients> {
+        let saved = (
+            self.positions().to_vec(),
+            self.velocities().to_vec(),
+            self.time(),
+            self.attachment_targets().to_vec(),
+        );
         let steps = tape.len();
         let mut state: Option<Resume> = None;
         let mut outcome = Ok(());
@@ -650,10 +748,24 @@ impl Simulator {
                 }
             };
             let mut carry = None;
-            match self.backward_segments(tape, &[(cp.step, &records[..])], dl_dx, dl_dv, options, state.take(), &mut carry) {
+            match self.backward_segments(
+                tape,
+                &[(cp.step, &records[..])],
+                dl_dx,
+                dl_dv,
+                options,
+                state.take(),
+                &mut carry,
+            ) {
                 Ok(g) => {
                     let (carry_x, carry_v, z, z_previous) = carry.expect("set on success");
-                    state = Some(Resume { grads: g, carry_x, carry_v, z, z_previous });
+                    state = Some(Resume {
+                        grads: g,
+                        carry_x,
+                        carry_v,
+                        z,
+                        z_previous,
+                    });
                 }
                 Err(e) => {
                     outcome = Err(e);
@@ -663,7 +775,9 @@ impl Simulator {
         }
         // Back to the state before backward.
         self.put_tape(None);
-        let restored = self.reset(Some(&saved.0), Some(&saved.1)).and_then(|_| self.set_time(saved.2));
+        let restored = self
+            .reset(Some(&saved.0), Some(&saved.1))
+            .and_then(|_| self.set_time(saved.2));
         if let Some(a) = self.attachments_mut() {
             a.set_targets(&saved.3);
         }
@@ -672,7 +786,11 @@ impl Simulator {
         Ok(state.map(|r| r.grads).unwrap_or_default())
     }
 
-    fn resimulate(&mut self, cp: &crate::tape::Checkpoint, inputs: &[crate::tape::StepInputs]) -> Result<Vec<StepRecord>> {
+    fn resimulate(
+        &mut self,
+        cp: &crate::tape::Checkpoint,
+        inputs: &[crate::tape::StepInputs],
+    ) -> Result<Vec<StepRecord>> {
         self.set_recording(true);
         self.reset(Some(&cp.x), Some(&cp.v))?;
         self.set_time(cp.time)?;
@@ -701,7 +819,10 @@ impl Simulator {
         let n = self.num_nodes();
         for (name, g) in [("dl_dx", dl_dx), ("dl_dv", dl_dv)] {
             if !g.is_empty() && g.len() != steps {
-                return Err(Error::Input(format!("{name} must have one entry per recorded step ({steps}), got {}", g.len())));
+                return Err(Error::Input(format!(
+                    "{name} must have one entry per recorded step ({steps}), got {}",
+                    g.len()
+                )));
             }
             for (k, a) in g.iter().enumerate() {
                 if a.len() != n || !a.iter().all(|p| p.iter().all(|c| c.is_finite())) {
@@ -709,12 +830,22 @@ impl Simulator {
                 }
             }
         }
-        if !(options.tolerance > 0.0 && options.tolerance.is_finite()) || options.max_iterations == 0 {
-            return Err(Error::Param("backward tolerance must be positive and max_iterations at least 1".into()));
+        if !(options.tolerance > 0.0 && options.tolerance.is_finite())
+            || options.max_iterations == 0
+        {
+            return Err(Error::Param(
+                "backward tolerance must be positive and max_iterations at least 1".into(),
+            ));
         }
         let h = self.params().h;
         let mass = self.masses();
-        let Resume { mut grads, mut carry_x, mut carry_v, mut z, z_previous } = resume.unwrap_or_else(|| Resume {
+        let Resume {
+            mut grads,
+            mut carry_x,
+            mut carry_v,
+            mut z,
+            z_previous,
+        } = resume.unwrap_or_else(|| Resume {
             grads: Gradients {
                 mu_obstacles: vec![0.0; self.obstacles().len()],
                 attachment_targets: vec![Vec::new(); steps],
@@ -738,8 +869,23 @@ impl Simulator {
             buffers: Mutex::new((vec![Vec3::zeros(); n], vec![Vec3::zeros(); n])),
         };
         let mut scratch = MemBuffer::new(StackReq::any_of(&[
-            bicgstab_scratch(IdentityPrecond { dim: 3 * n }, PdPreconditioner { factor: self.factor() }, &op, 1, Par::Seq),
-            conjugate_gradient_scratch(PdPreconditioner { factor: self.factor() }, &op, 1, Par::Seq),
+            bicgstab_scratch(
+                IdentityPrecond { dim: 3 * n },
+                PdPreconditioner {
+                    factor: self.factor(),
+                },
+                &op,
+                1,
+                Par::Seq,
+            ),
+            conjugate_gradient_scratch(
+                PdPreconditioner {
+                    factor: self.factor(),
+                },
+                &op,
+                1,
+                Par::Seq,
+            ),
             self.factor().solve_scratch(),
         ]));
         for &(first, records) in segments.iter().rev() {
@@ -776,7 +922,8 @@ impl Simulator {
                 have_previous = true;
                 grads.steps[k] = self.solve_adjoint(&op, &rhs, &mut z, options, &mut scratch)?;
                 grads.profile.solve += t_solve.elapsed();
-                let (zeta, frame_x) = self.accumulate(rec, &op.contacts, &op.coupling, &z, &mut grads, k);
+                let (zeta, frame_x) =
+                    self.accumulate(rec, &op.contacts, &op.coupling, &z, &mut grads, k);
                 for i in 0..n {
                     carry_x[i] = mass[i] / (h * h) * z[i] - a_v[i] / h + frame_x[i];
                     carry_v[i] = mass[i] / h * z[i] + mass[i] * zeta[i];
@@ -791,7 +938,11 @@ impl Simulator {
         *carry_out = Some((carry_x, carry_v, z, have_previous.then_some(z_previous)));
         grads.warnings.clear();
         if !grads.loose_steps.is_empty() {
-            let worst = grads.loose_steps.iter().map(|&(_, r)| r).fold(0.0, f64::max);
+            let worst = grads
+                .loose_steps
+                .iter()
+                .map(|&(_, r)| r)
+                .fold(0.0, f64::max);
             let first = grads.loose_steps.iter().map(|&(k, _)| k).min().unwrap_or(0);
             grads.warnings.push(format!(
                 "{} of {steps} recorded steps stopped above the residual {TRUSTED_FORWARD_RESIDUAL:e} (worst {worst:.1e}, first at step {first}): \
@@ -802,7 +953,9 @@ impl Simulator {
         }
         let fell_back = grads.steps.iter().filter(|s| s.fell_back).count();
         if fell_back > 0 && options.solver != AdjointSolver::Direct {
-            grads.warnings.push(format!("{fell_back} of {steps} adjoint solves fell back to the direct solver"));
+            grads.warnings.push(format!(
+                "{fell_back} of {steps} adjoint solves fell back to the direct solver"
+            ));
         }
         Ok(grads)
     }
@@ -834,8 +987,14 @@ impl Simulator {
         };
         if let Some(Some(iterations)) = iterative {
             let residual = residual_of(z);
-            if residual <= options.tolerance * 10.0 && z.iter().all(|v| v.iter().all(|c| c.is_finite())) {
-                return Ok(AdjointStepStats { iterations, fell_back: false, residual });
+            if residual <= options.tolerance * 10.0
+                && z.iter().all(|v| v.iter().all(|c| c.is_finite()))
+            {
+                return Ok(AdjointStepStats {
+                    iterations,
+                    fell_back: false,
+                    residual,
+                });
             }
         }
         self.direct(op, g, z)?;
@@ -854,7 +1013,14 @@ impl Simulator {
     /// (free: `H^T z` is needed for the update anyway), not on the update size, which
     /// understates the error when the iteration converges slowly. Returns the iteration count,
     /// or None on divergence or at the cap.
-    fn fixed_point(&self, op: &AdjointOperator<'_>, g: &[Vec3], z: &mut [Vec3], options: &BackwardOptions, scratch: &mut MemBuffer) -> Option<usize> {
+    fn fixed_point(
+        &self,
+        op: &AdjointOperator<'_>,
+        g: &[Vec3],
+        z: &mut [Vec3],
+        options: &BackwardOptions,
+        scratch: &mut MemBuffer,
+    ) -> Option<usize> {
         let n = g.len();
         let g_norm = norm(g);
         let mut rhs = g.to_vec();
@@ -867,7 +1033,13 @@ impl Simulator {
         let mut growing = 0;
         for it in 0..=options.max_iterations {
             op.apply_nodes(z, &mut hz);
-            let residual = g.iter().zip(&hz).map(|(a, b)| (a - b).norm_squared()).sum::<f64>().sqrt() / g_norm;
+            let residual = g
+                .iter()
+                .zip(&hz)
+                .map(|(a, b)| (a - b).norm_squared())
+                .sum::<f64>()
+                .sqrt()
+                / g_norm;
             if !residual.is_finite() {
                 return None;
             }
@@ -889,7 +1061,14 @@ impl Simulator {
         None
     }
 
-    fn krylov(&self, op: &AdjointOperator<'_>, g: &[Vec3], z: &mut [Vec3], options: &BackwardOptions, scratch: &mut MemBuffer) -> Option<usize> {
+    fn krylov(
+        &self,
+        op: &AdjointOperator<'_>,
+        g: &[Vec3],
+        z: &mut [Vec3],
+        options: &BackwardOptions,
+        scratch: &mut MemBuffer,
+    ) -> Option<usize> {
         let n = g.len();
         let rhs = nodes_to_col(g);
         // Warm start from the previous (later) steps' adjoints: consecutive adjoints are close.
@@ -908,7 +1087,9 @@ impl Simulator {
             cg.max_iters = options.max_iterations;
             let result = conjugate_gradient(
                 cg_out.as_mut(),
-                PdPreconditioner { factor: self.factor() },
+                PdPreconditioner {
+                    factor: self.factor(),
+                },
                 op,
                 rhs.as_ref(),
                 cg,
@@ -931,7 +1112,9 @@ impl Simulator {
         let result = bicgstab(
             out.as_mut(),
             IdentityPrecond { dim: 3 * n },
-            PdPreconditioner { factor: self.factor() },
+            PdPreconditioner {
+                factor: self.factor(),
+            },
             op,
             rhs.as_ref(),
             params,
@@ -949,11 +1132,14 @@ impl Simulator {
         if !op.contacts.is_empty() {
             // H^T = H_nc - (dP - K) C with C = sum_c S^T Phi'^T E^T and dP - K = M/h^2 - H_nc.
             let h_nc = SparseColMat::<usize, f64>::try_new_from_triplets(3 * n, 3 * n, &triplets)
-                .map_err(|e| Error::Solver(format!("cannot assemble the adjoint matrix: {e:?}")))?;
+                .map_err(|e| {
+                Error::Solver(format!("cannot assemble the adjoint matrix: {e:?}"))
+            })?;
             let hr = h_nc.as_ref();
             let (mass, h) = (self.masses(), self.params().h);
             // C = S^T B^T (I - T^T B^T)^{-1} E^T in 3x3 blocks C[k, j].
-            let mut blocks: std::collections::BTreeMap<(usize, usize), Matrix3<f64>> = Default::default();
+            let mut blocks: std::collections::BTreeMap<(usize, usize), Matrix3<f64>> =
+                Default::default();
             for (group, inv) in op.coupling.inverse_groups(op.contacts.len()) {
                 for (bi, &c) in group.iter().enumerate() {
                     for (bj, &cp) in group.iter().enumerate() {
@@ -961,7 +1147,8 @@ impl Simulator {
                         let block = op.contacts[c].phi.transpose() * sub;
                         for &(k, s) in &op.contacts[c].s {
                             for &(j, e) in &op.contacts[cp].e {
-                                *blocks.entry((k, j)).or_insert_with(Matrix3::zeros) += (s * e) * block;
+                                *blocks.entry((k, j)).or_insert_with(Matrix3::zeros) +=
+                                    (s * e) * block;
                             }
                         }
                     }
@@ -971,7 +1158,11 @@ impl Simulator {
                 for ep in 0..3 {
                     let col = 3 * k + ep;
                     for (row, &val) in hr.row_idx_of_col(col).zip(hr.val_of_col(col)) {
-                        let a = if row == col { mass[k] / (h * h) - val } else { -val };
+                        let a = if row == col {
+                            mass[k] / (h * h) - val
+                        } else {
+                            -val
+                        };
                         for cp in 0..3 {
                             triplets.push(Triplet::new(row, 3 * j + cp, -a * block[(ep, cp)]));
                         }
@@ -981,7 +1172,9 @@ impl Simulator {
         }
         let h = SparseColMat::<usize, f64>::try_new_from_triplets(3 * n, 3 * n, &triplets)
             .map_err(|e| Error::Solver(format!("cannot assemble the adjoint matrix: {e:?}")))?;
-        let lu = h.sp_lu().map_err(|e| Error::Solver(format!("adjoint matrix is singular: {e:?}")))?;
+        let lu = h
+            .sp_lu()
+            .map_err(|e| Error::Solver(format!("adjoint matrix is singular: {e:?}")))?;
         let mut rhs = nodes_to_col(g);
         lu.solve_in_place(rhs.as_mut());
         col_to_nodes(&rhs, z);
@@ -1043,7 +1236,11 @@ impl Simulator {
         if !self.attachment_nodes().is_empty() {
             let nodes = self.attachment_nodes();
             grads.attachment_targets[k] = nodes.iter().map(|&j| p.k_attach * zf[j]).collect();
-            grads.k_attach -= nodes.iter().zip(&rec.targets).map(|(&j, t)| zf[j].dot(&(x[j] - t))).sum::<f64>();
+            grads.k_attach -= nodes
+                .iter()
+                .zip(&rec.targets)
+                .map(|(&j, t)| zf[j].dot(&(x[j] - t)))
+                .sum::<f64>();
         }
         if let Some(s) = self.stretch() {
             let (lo, hi) = s.strain_limits();
@@ -1083,7 +1280,11 @@ impl Simulator {
         if let Some(wind) = self.wind() {
             let s = wind.modulation(rec.time);
             let ds = 0.5 * (wind.omega * rec.time + wind.phi).cos();
-            let kz: Vec3 = zf.iter().zip(wind.coefficient()).map(|(zi, c)| *c * zi).sum();
+            let kz: Vec3 = zf
+                .iter()
+                .zip(wind.coefficient())
+                .map(|(zi, c)| *c * zi)
+                .sum();
             grads.wind_direction += s * kz;
             grads.wind_omega += ds * rec.time * kz.dot(&wind.direction);
             grads.wind_phi += ds * kz.dot(&wind.direction);
@@ -1091,4 +1292,3 @@ impl Simulator {
         (zeta, frame_x)
     }
 }
-

@@ -63,7 +63,13 @@ pub enum Effect {
 #[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
 pub enum MeshConfig {
     /// A rectangular `rows x cols` node grid of `width x height` metres.
-    Grid { rows: usize, cols: usize, width: f64, height: f64, plane: GridPlane },
+    Grid {
+        rows: usize,
+        cols: usize,
+        width: f64,
+        height: f64,
+        plane: GridPlane,
+    },
     /// The procedural hat (crown + brim, ~600 nodes) sized for a head sphere of radius 2.1.
     Hat {},
     /// The procedural sock (tube with a heel bend, closed toe, ~1000 nodes).
@@ -87,7 +93,11 @@ pub struct Placement {
 
 impl Default for Placement {
     fn default() -> Self {
-        Self { scale: 1.0, rotate_deg: [0.0; 3], translate: [0.0; 3] }
+        Self {
+            scale: 1.0,
+            rotate_deg: [0.0; 3],
+            translate: [0.0; 3],
+        }
     }
 }
 
@@ -157,7 +167,10 @@ pub struct ContactConfig {
 
 impl Default for ContactConfig {
     fn default() -> Self {
-        Self { thickness: default_thickness(), margin: default_margin() }
+        Self {
+            thickness: default_thickness(),
+            margin: default_margin(),
+        }
     }
 }
 
@@ -175,11 +188,21 @@ pub struct ObstacleConfig {
 }
 
 #[derive(Debug, Clone, Deserialize)]
-#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum ShapeConfig {
-    Plane { point: [f64; 3], normal: [f64; 3] },
-    Sphere { center: [f64; 3], radius: f64 },
-    Capsule { a: [f64; 3], b: [f64; 3], radius: f64 },
+    Plane {
+        point: [f64; 3],
+        normal: [f64; 3],
+    },
+    Sphere {
+        center: [f64; 3],
+        radius: f64,
+    },
+    Capsule {
+        a: [f64; 3],
+        b: [f64; 3],
+        radius: f64,
+    },
     Box {
         center: [f64; 3],
         half_extents: [f64; 3],
@@ -187,8 +210,21 @@ pub enum ShapeConfig {
         rotate_deg: [f64; 3],
     },
     /// Spherical cavity of `radius` around `center`, open above `y = rim_height`.
-    Bowl { center: [f64; 3], radius: f64, rim_height: f64 },
-    Union { parts: Vec<ShapeConfig> },
+    Bowl {
+        center: [f64; 3],
+        radius: f64,
+        rim_height: f64,
+    },
+    /// Upside-down square pyramid pit: walls from `apex` to a square of `half_width` at
+    /// `apex.y + height`, solid around it below that rim.
+    PyramidPit {
+        apex: [f64; 3],
+        half_width: f64,
+        height: f64,
+    },
+    Union {
+        parts: Vec<ShapeConfig>,
+    },
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -299,9 +335,12 @@ fn default_history() -> usize {
 impl SceneConfig {
     /// Parses a TOML scene file; relative mesh paths are resolved against its folder.
     pub fn from_toml_file(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| Error::Io { path: path.display().to_string(), message: e.to_string() })?;
-        let mut cfg: Self = toml::from_str(&text).map_err(|e| Error::Config(format!("{}: {e}", path.display())))?;
+        let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        let mut cfg: Self =
+            toml::from_str(&text).map_err(|e| Error::Config(format!("{}: {e}", path.display())))?;
         cfg.resolve_paths(path.parent().unwrap_or(Path::new(".")));
         Ok(cfg)
     }

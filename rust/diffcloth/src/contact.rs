@@ -157,7 +157,10 @@ impl ContactSet {
                 let (distance, normal) = obstacle.shape.distance(&(p - offset));
                 if distance < obstacle_reach + 2.0 * h * vj.norm() {
                     self.contacts.push(Contact {
-                        kind: ContactKind::Obstacle { node: j, obstacle: o },
+                        kind: ContactKind::Obstacle {
+                            node: j,
+                            obstacle: o,
+                        },
                         normal,
                         gap: distance - settings.thickness,
                         mu: friction(obstacle.mu),
@@ -179,7 +182,11 @@ impl ContactSet {
                 if distance >= base + 2.0 * h * (v[a].norm() + v[b].norm()) {
                     continue;
                 }
-                let normal = if distance > 0.0 { (x[a] - x[b]) / distance } else { Vec3::y() };
+                let normal = if distance > 0.0 {
+                    (x[a] - x[b]) / distance
+                } else {
+                    Vec3::y()
+                };
                 self.contacts.push(Contact {
                     kind: ContactKind::SelfPair { a, b },
                     normal,
@@ -209,7 +216,9 @@ impl ContactSet {
         };
         for c in &self.contacts {
             match c.kind {
-                ContactKind::Obstacle { node, .. } => add(node, &mut self.nodes, &mut self.per_node_count),
+                ContactKind::Obstacle { node, .. } => {
+                    add(node, &mut self.nodes, &mut self.per_node_count)
+                }
                 ContactKind::SelfPair { a, b } => {
                     add(a, &mut self.nodes, &mut self.per_node_count);
                     add(b, &mut self.nodes, &mut self.per_node_count);
@@ -230,7 +239,15 @@ impl ContactSet {
     /// is solved by projected Gauss-Seidel: each contact's law is applied given the other
     /// contacts' current impulses, warm-started from the previous iteration's, until the
     /// impulses stop changing. With one contact per node a single sweep is exact.
-    pub fn solve(&mut self, x: &[Vec3], x_n: &[Vec3], mass: &[f64], h: f64, system: &SparseColMat<usize, f64>, rhs: &mut [Vec3]) {
+    pub fn solve(
+        &mut self,
+        x: &[Vec3],
+        x_n: &[Vec3],
+        mass: &[f64],
+        h: f64,
+        system: &SparseColMat<usize, f64>,
+        rhs: &mut [Vec3],
+    ) {
         let inv_h2 = 1.0 / (h * h);
         let m = system.as_ref();
         // Free velocity of each contact node from the splitting (paper Eqn. 12):
@@ -273,7 +290,8 @@ impl ContactSet {
                     ContactKind::Obstacle { node, .. } => velocity[node] - c.obstacle_velocity,
                     ContactKind::SelfPair { a, b } => velocity[a] - velocity[b],
                 };
-                (c.branch, c.impulse) = signorini_coulomb(c.mass * relative, c.normal, c.gap, c.mass, h, c.mu);
+                (c.branch, c.impulse) =
+                    signorini_coulomb(c.mass * relative, c.normal, c.gap, c.mass, h, c.mu);
                 apply(c, c.impulse, velocity);
                 change = change.max((c.impulse - own).amax());
                 scale = scale.max(c.impulse.amax());
@@ -307,13 +325,19 @@ mod tests {
         let (b, j) = signorini_coulomb(Vec3::new(1.0, 0.5, 0.0), n, 0.0, m, h, mu);
         assert_eq!((b, j), (Branch::TakeOff, Vec3::zeros()));
         // Approaching slowly from above a positive gap: still free.
-        assert_eq!(signorini_coulomb(Vec3::new(0.0, -1.0, 0.0), n, 0.01, m, h, mu).0, Branch::TakeOff);
+        assert_eq!(
+            signorini_coulomb(Vec3::new(0.0, -1.0, 0.0), n, 0.01, m, h, mu).0,
+            Branch::TakeOff
+        );
         // Inside the cone: the resulting relative velocity is zero (gap zero).
         let d = Vec3::new(0.3, -1.0, 0.1);
         let (b, j) = signorini_coulomb(d, n, 0.0, m, h, mu);
         assert_eq!(b, Branch::Stick);
         assert!((d + j).norm() < 1e-15);
-        assert!(Vec3::new(j.x, 0.0, j.z).norm() <= mu * j.y + 1e-15, "force in the cone");
+        assert!(
+            Vec3::new(j.x, 0.0, j.z).norm() <= mu * j.y + 1e-15,
+            "force in the cone"
+        );
         // Outside the cone: normal velocity zero, friction on the cone boundary, opposing.
         let d = Vec3::new(2.0, -1.0, 0.0);
         let (b, j) = signorini_coulomb(d, n, 0.0, m, h, mu);

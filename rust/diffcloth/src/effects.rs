@@ -35,13 +35,30 @@ impl Effects {
         };
         let pairs = [
             ("wind", "[wind]", e.wind, cfg.wind.is_some()),
-            ("attachments", "[attachments]", e.attachments, cfg.attachments.is_some()),
-            ("obstacle_contact", "[[obstacles]]", e.obstacle_contact, !cfg.obstacles.is_empty()),
-            ("self_collision", "[self_collision]", e.self_collision, cfg.self_collision.is_some()),
+            (
+                "attachments",
+                "[attachments]",
+                e.attachments,
+                cfg.attachments.is_some(),
+            ),
+            (
+                "obstacle_contact",
+                "[[obstacles]]",
+                e.obstacle_contact,
+                !cfg.obstacles.is_empty(),
+            ),
+            (
+                "self_collision",
+                "[self_collision]",
+                e.self_collision,
+                cfg.self_collision.is_some(),
+            ),
         ];
         for (name, table, declared, configured) in pairs {
             if declared && !configured {
-                return Err(Error::Config(format!("effect '{name}' is declared but the {table} table is missing")));
+                return Err(Error::Config(format!(
+                    "effect '{name}' is declared but the {table} table is missing"
+                )));
             }
             if configured && !declared {
                 return Err(Error::Config(format!(

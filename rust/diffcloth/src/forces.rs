@@ -21,9 +21,14 @@ impl Wind {
             "uniform" => vec![1.0; rest.len()],
             "inverse_distance" => {
                 let centroid = rest.iter().sum::<Vec3>() / rest.len() as f64;
-                let scale = rest.iter().map(|p| (p - centroid).norm()).fold(0.0, f64::max);
+                let scale = rest
+                    .iter()
+                    .map(|p| (p - centroid).norm())
+                    .fold(0.0, f64::max);
                 // Floor the distance at 1 % of the extent so a node at the centre stays finite.
-                rest.iter().map(|p| 1.0 / (p - centroid).norm().max(1e-2 * scale)).collect()
+                rest.iter()
+                    .map(|p| 1.0 / (p - centroid).norm().max(1e-2 * scale))
+                    .collect()
             }
             other => {
                 return Err(Error::Config(format!(
@@ -32,16 +37,29 @@ impl Wind {
             }
         };
         if cfg.per_area {
-            coefficient.iter_mut().zip(node_area).for_each(|(k, a)| *k *= a);
+            coefficient
+                .iter_mut()
+                .zip(node_area)
+                .for_each(|(k, a)| *k *= a);
         }
-        let wind = Self { direction: Vec3::from(cfg.direction), omega: cfg.omega, phi: cfg.phi, coefficient };
+        let wind = Self {
+            direction: Vec3::from(cfg.direction),
+            omega: cfg.omega,
+            phi: cfg.phi,
+            coefficient,
+        };
         wind.validate()?;
         Ok(wind)
     }
 
     pub fn validate(&self) -> Result<()> {
-        if !(self.direction.iter().all(|c| c.is_finite()) && self.omega.is_finite() && self.phi.is_finite()) {
-            return Err(Error::Param("wind direction, omega and phi must be finite".into()));
+        if !(self.direction.iter().all(|c| c.is_finite())
+            && self.omega.is_finite()
+            && self.phi.is_finite())
+        {
+            return Err(Error::Param(
+                "wind direction, omega and phi must be finite".into(),
+            ));
         }
         Ok(())
     }

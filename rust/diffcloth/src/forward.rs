@@ -139,7 +139,9 @@ impl Simulator {
         validate_params(&params)?;
         let [lo, hi] = m.strain_limits;
         if !(lo > 0.0 && lo <= hi && hi.is_finite()) {
-            return Err(Error::Config(format!("material.strain_limits must satisfy 0 < min <= max, got [{lo}, {hi}]")));
+            return Err(Error::Config(format!(
+                "material.strain_limits must satisfy 0 < min <= max, got [{lo}, {hi}]"
+            )));
         }
         let solver = SolverSettings {
             max_iterations: s.max_iterations,
@@ -161,7 +163,9 @@ impl Simulator {
         validate_solver(&solver)?;
 
         let node_area = mesh.vertex_areas();
-        let stretch = effects.stretch.then(|| Stretch::new(&mesh, params.k_stretch, lo, hi));
+        let stretch = effects
+            .stretch
+            .then(|| Stretch::new(&mesh, params.k_stretch, lo, hi));
         let bend = effects.bend.then(|| Bend::new(&mesh, params.k_bend));
         let attachments = match (&config.attachments, effects.attachments) {
             (Some(a), true) => {
@@ -176,14 +180,22 @@ impl Simulator {
             _ => None,
         };
         let obstacles = if effects.obstacle_contact {
-            config.obstacles.iter().enumerate().map(|(i, o)| build_obstacle(i, o)).collect::<Result<Vec<_>>>()?
+            config
+                .obstacles
+                .iter()
+                .enumerate()
+                .map(|(i, o)| build_obstacle(i, o))
+                .collect::<Result<Vec<_>>>()?
         } else {
             Vec::new()
         };
         let self_collision = match (&config.self_collision, effects.self_collision) {
             (Some(sc), true) => {
                 if !(sc.radius > 0.0 && sc.radius.is_finite()) {
-                    return Err(Error::Config(format!("self_collision.radius must be positive, got {}", sc.radius)));
+                    return Err(Error::Config(format!(
+                        "self_collision.radius must be positive, got {}",
+                        sc.radius
+                    )));
                 }
                 check_mu("self_collision.mu", sc.mu)?;
                 Some(SelfCollision::new(&mesh, sc.radius, sc.mu))
@@ -191,8 +203,14 @@ impl Simulator {
             _ => None,
         };
         let contact_cfg = config.contact.clone().unwrap_or_default();
-        if !(contact_cfg.thickness >= 0.0 && contact_cfg.margin >= 0.0 && contact_cfg.thickness.is_finite() && contact_cfg.margin.is_finite()) {
-            return Err(Error::Config("contact.thickness and contact.margin must be non-negative".into()));
+        if !(contact_cfg.thickness >= 0.0
+            && contact_cfg.margin >= 0.0
+            && contact_cfg.thickness.is_finite()
+            && contact_cfg.margin.is_finite())
+        {
+            return Err(Error::Config(
+                "contact.thickness and contact.margin must be non-negative".into(),
+            ));
         }
         let contact_settings = ContactSettings {
             thickness: contact_cfg.thickness,
@@ -247,14 +265,22 @@ impl Simulator {
     fn constraint_sets(&mut self) -> impl Iterator<Item = &mut dyn PdConstraints> {
         let s = self.stretch.as_mut().map(|c| c as &mut dyn PdConstraints);
         let b = self.bend.as_mut().map(|c| c as &mut dyn PdConstraints);
-        let a = self.attachments.as_mut().map(|c| c as &mut dyn PdConstraints);
+        let a = self
+            .attachments
+            .as_mut()
+            .map(|c| c as &mut dyn PdConstraints);
         [s, b, a].into_iter().flatten()
     }
 
     /// Triplets of `P_s = M / h^2 + sum_i w_i A_i^T A_i`.
     fn system_triplets(&mut self) -> Vec<(usize, usize, f64)> {
         let inv_h2 = 1.0 / (self.params.h * self.params.h);
-        let mut t: Vec<(usize, usize, f64)> = self.mass.iter().enumerate().map(|(i, m)| (i, i, m * inv_h2)).collect();
+        let mut t: Vec<(usize, usize, f64)> = self
+            .mass
+            .iter()
+            .enumerate()
+            .map(|(i, m)| (i, i, m * inv_h2))
+            .collect();
         for c in self.constraint_sets() {
             c.add_system_triplets(&mut t);
         }
@@ -452,7 +478,10 @@ impl Simulator {
 
     fn apply_matrix_params(&mut self) {
         let p = self.params.clone();
-        self.mass.iter_mut().zip(&self.node_area).for_each(|(m, a)| *m = p.density * a);
+        self.mass
+            .iter_mut()
+            .zip(&self.node_area)
+            .for_each(|(m, a)| *m = p.density * a);
         if let Some(s) = self.stretch.as_mut() {
             s.set_stiffness(p.k_stretch);
         }
@@ -468,10 +497,11 @@ impl Simulator {
     pub fn set_obstacle_mu(&mut self, index: usize, mu: f64) -> Result<()> {
         check_mu("mu", mu).map_err(|e| Error::Param(e.to_string()))?;
         let count = self.obstacles.len();
-        let o = self
-            .obstacles
-            .get_mut(index)
-            .ok_or_else(|| Error::Param(format!("obstacle {index} does not exist ({count} obstacles)")))?;
+        let o = self.obstacles.get_mut(index).ok_or_else(|| {
+            Error::Param(format!(
+                "obstacle {index} does not exist ({count} obstacles)"
+            ))
+        })?;
         o.mu = mu;
         Ok(())
     }
@@ -479,7 +509,10 @@ impl Simulator {
     /// Sets the self-contact friction coefficient.
     pub fn set_self_mu(&mut self, mu: f64) -> Result<()> {
         check_mu("mu", mu).map_err(|e| Error::Param(e.to_string()))?;
-        let sc = self.self_collision.as_mut().ok_or_else(|| Error::Param("the scene has no self-collision".into()))?;
+        let sc = self
+            .self_collision
+            .as_mut()
+            .ok_or_else(|| Error::Param("the scene has no self-collision".into()))?;
         sc.mu = mu;
         Ok(())
     }
@@ -525,7 +558,11 @@ impl Simulator {
             if let Some(tape) = self.tape.as_mut().filter(|t| t.checkpoint_every.is_some()) {
                 // The step did not happen: forget its inputs (and its checkpoint).
                 tape.inputs.pop();
-                if tape.checkpoints.last().is_some_and(|c| c.step == tape.inputs.len()) {
+                if tape
+                    .checkpoints
+                    .last()
+                    .is_some_and(|c| c.step == tape.inputs.len())
+                {
                     tape.checkpoints.pop();
                 }
             }
@@ -539,7 +576,10 @@ impl Simulator {
                 x_prev: self.x.clone(),
                 v_prev: self.v.clone(),
                 x_next: self.mapped.clone(),
-                targets: self.attachments.as_ref().map_or(Vec::new(), |a| a.targets().to_vec()),
+                targets: self
+                    .attachments
+                    .as_ref()
+                    .map_or(Vec::new(), |a| a.targets().to_vec()),
                 time: self.time,
                 contacts: self.contacts.contacts.clone(),
                 residual: stats.residual,
@@ -561,18 +601,30 @@ impl Simulator {
         p.contacts_slip += stats.contacts.slip as u64;
         let total = start.elapsed();
         p.total += total;
-        let staged = (p.local - p0.local) + (p.global - p0.global) + (p.detection - p0.detection) + (p.contact_solve - p0.contact_solve);
+        let staged = (p.local - p0.local)
+            + (p.global - p0.global)
+            + (p.detection - p0.detection)
+            + (p.contact_solve - p0.contact_solve);
         p.other += total.saturating_sub(staged);
         Ok(stats)
     }
 
     /// Checkpointed recording: the entering state at segment starts, and every step's inputs.
     fn record_inputs(&mut self, input: &StepInput<'_>) {
-        let Some(tape) = self.tape.as_mut() else { return };
-        let Some(every) = tape.checkpoint_every else { return };
+        let Some(tape) = self.tape.as_mut() else {
+            return;
+        };
+        let Some(every) = tape.checkpoint_every else {
+            return;
+        };
         let index = tape.inputs.len();
         if index % every == 0 {
-            tape.checkpoints.push(Checkpoint { step: index, x: self.x.clone(), v: self.v.clone(), time: self.time });
+            tape.checkpoints.push(Checkpoint {
+                step: index,
+                x: self.x.clone(),
+                v: self.v.clone(),
+                time: self.time,
+            });
         }
         tape.inputs.push(StepInputs {
             // `prepare` has already applied this step's targets.
@@ -587,7 +639,9 @@ impl Simulator {
         let n = self.num_nodes();
         if let Some(t) = input.attachment_targets {
             let Some(a) = self.attachments.as_mut() else {
-                return Err(Error::Input("attachment targets given but the scene has no attachments".into()));
+                return Err(Error::Input(
+                    "attachment targets given but the scene has no attachments".into(),
+                ));
             };
             check_nodes("attachment_targets", t, a.nodes().len())?;
             a.set_targets(t);
@@ -595,7 +649,8 @@ impl Simulator {
         if let Some(f) = input.external_forces {
             if !self.effects.external_forces {
                 return Err(Error::Input(
-                    "external forces given but 'external_forces' is not in the scene's effects".into(),
+                    "external forces given but 'external_forces' is not in the scene's effects"
+                        .into(),
                 ));
             }
             check_nodes("external_forces", f, n)?;
@@ -609,7 +664,9 @@ impl Simulator {
         }
         if self.effects.gravity {
             let g = self.params.gravity;
-            f.iter_mut().zip(&self.mass).for_each(|(fi, m)| *fi += *m * g);
+            f.iter_mut()
+                .zip(&self.mass)
+                .for_each(|(fi, m)| *fi += *m * g);
         }
         if let Some(w) = &self.wind {
             w.add_forces(self.time, f);
@@ -633,8 +690,13 @@ impl Simulator {
         let mut rhs = std::mem::take(&mut self.update);
         rhs.copy_from_slice(&self.inertia_rhs);
         let inv_2h2 = 0.5 / (self.params.h * self.params.h);
-        let mut energy: f64 =
-            x.iter().zip(&self.y).zip(&self.mass).map(|((xi, yi), m)| m * (xi - yi).norm_squared()).sum::<f64>() * inv_2h2;
+        let mut energy: f64 = x
+            .iter()
+            .zip(&self.y)
+            .zip(&self.mass)
+            .map(|((xi, yi), m)| m * (xi - yi).norm_squared())
+            .sum::<f64>()
+            * inv_2h2;
         for c in self.constraint_sets() {
             energy += c.project(&x, parallel);
             c.add_rhs(&mut rhs);
@@ -656,9 +718,16 @@ impl Simulator {
     /// Returns the RMS of the update.
     fn global_step(&mut self) -> f64 {
         let factor = &mut self.factor;
-        timed(&mut self.profile.global, || factor.solve_xyz(&mut self.update));
+        timed(&mut self.profile.global, || {
+            factor.solve_xyz(&mut self.update)
+        });
         let mut sum = 0.0;
-        for ((u, g), x) in self.update.iter_mut().zip(self.mapped.iter_mut()).zip(&self.iterate) {
+        for ((u, g), x) in self
+            .update
+            .iter_mut()
+            .zip(self.mapped.iter_mut())
+            .zip(&self.iterate)
+        {
             *g = *u;
             *u -= x;
             sum += u.norm_squared();
@@ -683,10 +752,16 @@ impl Simulator {
         }
         // Recorded steps converge further: the adjoint needs the converged solution.
         let user_tol = self.solver.tolerance;
-        let tol = if self.tape.is_some() { user_tol.min(self.solver.record_tolerance) } else { user_tol };
+        let tol = if self.tape.is_some() {
+            user_tol.min(self.solver.record_tolerance)
+        } else {
+            user_tol
+        };
         let mut reached_user_tol: Option<usize> = None;
         let max_it = if self.tape.is_some() {
-            self.solver.max_iterations.max(self.solver.record_max_iterations)
+            self.solver
+                .max_iterations
+                .max(self.solver.record_max_iterations)
         } else {
             self.solver.max_iterations
         };
@@ -700,7 +775,10 @@ impl Simulator {
             let mut accepted = false;
             if self.solver.anderson {
                 self.anderson.push(&self.update, &self.mapped);
-                if self.anderson.extrapolate(&self.update, &self.mapped, &mut self.extrapolated) {
+                if self
+                    .anderson
+                    .extrapolate(&self.update, &self.mapped, &mut self.extrapolated)
+                {
                     let trial = self.local_step(Buffer::Extrapolated);
                     if energy_guard {
                         if trial < energy {
@@ -749,7 +827,12 @@ impl Simulator {
         if let Some(at) = reached_user_tol {
             self.profile.polish_iterations += (iterations - at) as u64;
         }
-        StepStats { iterations, residual, converged: residual <= tol, contacts: self.contacts.counts() }
+        StepStats {
+            iterations,
+            residual,
+            converged: residual <= tol,
+            contacts: self.contacts.counts(),
+        }
     }
 
     /// Adds this iteration's contact forces at the iterate to the right-hand side in `update`.
@@ -759,7 +842,14 @@ impl Simulator {
         }
         let start = Instant::now();
         let x = std::mem::take(self.buffer(which));
-        self.contacts.solve(&x, &self.x, &self.mass, self.params.h, self.factor.matrix(), &mut self.update);
+        self.contacts.solve(
+            &x,
+            &self.x,
+            &self.mass,
+            self.params.h,
+            self.factor.matrix(),
+            &mut self.update,
+        );
         *self.buffer(which) = x;
         self.profile.contact_solve += start.elapsed();
     }
@@ -793,9 +883,19 @@ impl Simulator {
 
     /// Total mechanical energy: kinetic + gravitational + elastic at the current state.
     pub fn mechanical_energy(&mut self) -> f64 {
-        let kinetic: f64 = self.v.iter().zip(&self.mass).map(|(v, m)| 0.5 * m * v.norm_squared()).sum();
+        let kinetic: f64 = self
+            .v
+            .iter()
+            .zip(&self.mass)
+            .map(|(v, m)| 0.5 * m * v.norm_squared())
+            .sum();
         let potential: f64 = if self.effects.gravity {
-            -self.x.iter().zip(&self.mass).map(|(x, m)| m * self.params.gravity.dot(x)).sum::<f64>()
+            -self
+                .x
+                .iter()
+                .zip(&self.mass)
+                .map(|(x, m)| m * self.params.gravity.dot(x))
+                .sum::<f64>()
         } else {
             0.0
         };
@@ -813,7 +913,9 @@ enum Buffer {
 
 fn check_mu(name: &str, mu: f64) -> Result<()> {
     if !(mu >= 0.0 && mu.is_finite()) {
-        return Err(Error::Config(format!("{name} must be non-negative and finite, got {mu}")));
+        return Err(Error::Config(format!(
+            "{name} must be non-negative and finite, got {mu}"
+        )));
     }
     Ok(())
 }
@@ -823,11 +925,25 @@ fn build_shape(cfg: &ShapeConfig) -> Shape {
     match cfg {
         ShapeConfig::Plane { point, normal } => {
             let n = v(*normal);
-            Shape::Plane { point: v(*point), normal: if n.norm() > 0.0 { n.normalize() } else { n } }
+            Shape::Plane {
+                point: v(*point),
+                normal: if n.norm() > 0.0 { n.normalize() } else { n },
+            }
         }
-        ShapeConfig::Sphere { center, radius } => Shape::Sphere { center: v(*center), radius: *radius },
-        ShapeConfig::Capsule { a, b, radius } => Shape::Capsule { a: v(*a), b: v(*b), radius: *radius },
-        ShapeConfig::Box { center, half_extents, rotate_deg } => {
+        ShapeConfig::Sphere { center, radius } => Shape::Sphere {
+            center: v(*center),
+            radius: *radius,
+        },
+        ShapeConfig::Capsule { a, b, radius } => Shape::Capsule {
+            a: v(*a),
+            b: v(*b),
+            radius: *radius,
+        },
+        ShapeConfig::Box {
+            center,
+            half_extents,
+            rotate_deg,
+        } => {
             let [rx, ry, rz] = rotate_deg.map(f64::to_radians);
             Shape::Box {
                 center: v(*center),
@@ -835,22 +951,43 @@ fn build_shape(cfg: &ShapeConfig) -> Shape {
                 rotation: nalgebra::Rotation3::from_euler_angles(rx, ry, rz),
             }
         }
-        ShapeConfig::Bowl { center, radius, rim_height } => {
-            Shape::Bowl { center: v(*center), radius: *radius, rim_height: *rim_height }
-        }
+        ShapeConfig::Bowl {
+            center,
+            radius,
+            rim_height,
+        } => Shape::Bowl {
+            center: v(*center),
+            radius: *radius,
+            rim_height: *rim_height,
+        },
+        ShapeConfig::PyramidPit {
+            apex,
+            half_width,
+            height,
+        } => Shape::PyramidPit {
+            apex: v(*apex),
+            half_width: *half_width,
+            height: *height,
+        },
         ShapeConfig::Union { parts } => Shape::Union(parts.iter().map(build_shape).collect()),
     }
 }
 
 fn build_obstacle(index: usize, cfg: &crate::config::ObstacleConfig) -> Result<Obstacle> {
     let shape = build_shape(&cfg.shape);
-    shape.validate().map_err(|e| Error::Config(format!("obstacles[{index}]: {e}")))?;
+    shape
+        .validate()
+        .map_err(|e| Error::Config(format!("obstacles[{index}]: {e}")))?;
     check_mu(&format!("obstacles[{index}].mu"), cfg.mu)?;
     let motion = match (&cfg.velocity, &cfg.path) {
         (Some(_), Some(_)) => {
-            return Err(Error::Config(format!("obstacles[{index}]: give `velocity` or `path`, not both")))
+            return Err(Error::Config(format!(
+                "obstacles[{index}]: give `velocity` or `path`, not both"
+            )))
         }
-        (Some(vel), None) => Motion::Linear { velocity: Vec3::from(*vel) },
+        (Some(vel), None) => Motion::Linear {
+            velocity: Vec3::from(*vel),
+        },
         (None, Some(rows)) => {
             let ok = !rows.is_empty()
                 && rows.iter().all(|r| r.iter().all(|c| c.is_finite()))
@@ -860,19 +997,33 @@ fn build_obstacle(index: usize, cfg: &crate::config::ObstacleConfig) -> Result<O
                     "obstacles[{index}].path needs finite rows [t, dx, dy, dz] with increasing t"
                 )));
             }
-            Motion::Path(rows.iter().map(|r| (r[0], Vec3::new(r[1], r[2], r[3]))).collect())
+            Motion::Path(
+                rows.iter()
+                    .map(|r| (r[0], Vec3::new(r[1], r[2], r[3])))
+                    .collect(),
+            )
         }
         (None, None) => Motion::Static,
     };
-    Ok(Obstacle { shape, mu: cfg.mu, motion })
+    Ok(Obstacle {
+        shape,
+        mu: cfg.mu,
+        motion,
+    })
 }
 
 fn check_nodes(name: &str, values: &[Vec3], expected: usize) -> Result<()> {
     if values.len() != expected {
-        return Err(Error::Input(format!("{name} must have {expected} rows (one per node), got {}", values.len())));
+        return Err(Error::Input(format!(
+            "{name} must have {expected} rows (one per node), got {}",
+            values.len()
+        )));
     }
     if let Some(i) = values.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-        return Err(Error::Input(format!("{name} row {i} is not finite: {:?}", values[i].as_slice())));
+        return Err(Error::Input(format!(
+            "{name} row {i} is not finite: {:?}",
+            values[i].as_slice()
+        )));
     }
     Ok(())
 }
@@ -881,30 +1032,49 @@ fn validate_params(p: &Params) -> Result<()> {
     let positive = [("h", p.h), ("density", p.density)];
     for (name, v) in positive {
         if !(v > 0.0 && v.is_finite()) {
-            return Err(Error::Param(format!("{name} must be positive and finite, got {v}")));
+            return Err(Error::Param(format!(
+                "{name} must be positive and finite, got {v}"
+            )));
         }
     }
-    let non_negative = [("k_stretch", p.k_stretch), ("k_bend", p.k_bend), ("k_attach", p.k_attach)];
+    let non_negative = [
+        ("k_stretch", p.k_stretch),
+        ("k_bend", p.k_bend),
+        ("k_attach", p.k_attach),
+    ];
     for (name, v) in non_negative {
         if !(v >= 0.0 && v.is_finite()) {
-            return Err(Error::Param(format!("{name} must be non-negative and finite, got {v}")));
+            return Err(Error::Param(format!(
+                "{name} must be non-negative and finite, got {v}"
+            )));
         }
     }
-    let finite = p.gravity.iter().chain(p.wind_direction.iter()).all(|c| c.is_finite())
+    let finite = p
+        .gravity
+        .iter()
+        .chain(p.wind_direction.iter())
+        .all(|c| c.is_finite())
         && p.wind_omega.is_finite()
         && p.wind_phi.is_finite();
     if !finite {
-        return Err(Error::Param("gravity and wind parameters must be finite".into()));
+        return Err(Error::Param(
+            "gravity and wind parameters must be finite".into(),
+        ));
     }
     Ok(())
 }
 
 fn validate_solver(s: &SolverSettings) -> Result<()> {
     if s.max_iterations == 0 {
-        return Err(Error::Param("solver max_iterations must be at least 1".into()));
+        return Err(Error::Param(
+            "solver max_iterations must be at least 1".into(),
+        ));
     }
     if !(s.tolerance >= 0.0 && s.tolerance.is_finite()) {
-        return Err(Error::Param(format!("solver tolerance must be non-negative and finite, got {}", s.tolerance)));
+        return Err(Error::Param(format!(
+            "solver tolerance must be non-negative and finite, got {}",
+            s.tolerance
+        )));
     }
     if !(s.record_tolerance >= 0.0 && s.record_tolerance.is_finite()) {
         return Err(Error::Param(format!(

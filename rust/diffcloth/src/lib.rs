@@ -21,10 +21,10 @@ pub mod tape;
 /// 3-vectors are nalgebra's (node positions, velocities, forces).
 pub type Vec3 = nalgebra::Vector3<f64>;
 
+pub use backward::{AdjointSolver, BackwardOptions, Gradients};
 pub use config::{Effect, SceneConfig};
 pub use contact::{Branch, BranchCounts, Contact, ContactKind};
 pub use error::{Error, Result};
-pub use backward::{AdjointSolver, BackwardOptions, Gradients};
 pub use forward::{Params, Simulator, SolverSettings, StepInput, StepStats};
 pub use profile::Profile;
 

@@ -6,7 +6,8 @@ use crate::error::{Error, Result};
 use crate::Vec3;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholeskyRaw, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky,
+    SymbolicCholeskyRaw, SymmetricOrdering,
 };
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::{SparseColMat, Triplet};
@@ -89,7 +90,10 @@ impl SpdFactor {
 
     /// Stored values of the Cholesky factor and whether it is supernodal (for reports).
     pub fn factor_stats(&self) -> (usize, bool) {
-        (self.symbolic.len_val(), matches!(self.symbolic.raw(), SymbolicCholeskyRaw::Supernodal(_)))
+        (
+            self.symbolic.len_val(),
+            matches!(self.symbolic.raw(), SymbolicCholeskyRaw::Supernodal(_)),
+        )
     }
 
     pub fn dim(&self) -> usize {
@@ -130,7 +134,12 @@ impl SpdFactor {
     /// Solves `P_s X = B` for an n x k column block in place (no internal state touched, so
     /// it can serve as a shared preconditioner).
     pub fn solve_columns(&self, rhs: faer::MatMut<'_, f64>, stack: &mut MemStack) {
-        LltRef::new(&self.symbolic, &self.l_values).solve_in_place_with_conj(Conj::No, rhs, Par::Seq, stack);
+        LltRef::new(&self.symbolic, &self.l_values).solve_in_place_with_conj(
+            Conj::No,
+            rhs,
+            Par::Seq,
+            stack,
+        );
     }
 
     /// Like [`SpdFactor::solve_xyz`] without touching internal buffers.
@@ -164,8 +173,10 @@ impl SpdFactor {
 }
 
 fn assemble(n: usize, triplets: &[(usize, usize, f64)]) -> Result<SparseColMat<usize, f64>> {
-    let entries: Vec<Triplet<usize, usize, f64>> =
-        triplets.iter().map(|&(r, c, v)| Triplet::new(r, c, v)).collect();
+    let entries: Vec<Triplet<usize, usize, f64>> = triplets
+        .iter()
+        .map(|&(r, c, v)| Triplet::new(r, c, v))
+        .collect();
     SparseColMat::try_new_from_triplets(n, n, &entries)
         .map_err(|e| Error::Solver(format!("cannot assemble system matrix: {e:?}")))
 }
@@ -187,7 +198,9 @@ mod tests {
             }
         }
         let mut f = SpdFactor::new(n, &t).unwrap();
-        let x: Vec<Vec3> = (0..n).map(|i| Vec3::new(i as f64, 1.0, -(i as f64).powi(2))).collect();
+        let x: Vec<Vec3> = (0..n)
+            .map(|i| Vec3::new(i as f64, 1.0, -(i as f64).powi(2)))
+            .collect();
         let mut b = vec![Vec3::zeros(); n];
         f.mul_xyz(&x, &mut b);
         f.solve_xyz(&mut b);
@@ -195,7 +208,10 @@ mod tests {
             assert!((a - e).norm() < 1e-12);
         }
         // Non-SPD values are reported, not panicked on.
-        let bad: Vec<_> = t.iter().map(|&(r, c, v)| (r, c, if r == c { -v } else { v })).collect();
+        let bad: Vec<_> = t
+            .iter()
+            .map(|&(r, c, v)| (r, c, if r == c { -v } else { v }))
+            .collect();
         assert!(f.refactor(&bad).is_err());
     }
 }

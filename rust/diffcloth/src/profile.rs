@@ -43,7 +43,10 @@ impl Profile {
             ("steps", self.steps as f64),
             ("iterations", self.iterations as f64),
             ("unconverged_steps", self.unconverged_steps as f64),
-            ("acceleration_rejections", self.acceleration_rejections as f64),
+            (
+                "acceleration_rejections",
+                self.acceleration_rejections as f64,
+            ),
             ("polish_iterations", self.polish_iterations as f64),
             ("refactorizations", self.refactorizations as f64),
             ("local_s", self.local.as_secs_f64()),

@@ -64,7 +64,10 @@ pub struct Tape {
 
 impl Tape {
     pub fn checkpointed(every: usize) -> Self {
-        Self { checkpoint_every: Some(every.max(1)), ..Default::default() }
+        Self {
+            checkpoint_every: Some(every.max(1)),
+            ..Default::default()
+        }
     }
 
     /// Recorded steps.
@@ -83,13 +86,18 @@ impl Tape {
     /// Memory held by the tape in bytes.
     pub fn bytes(&self) -> usize {
         let v = std::mem::size_of::<Vec3>();
-        let checkpoints: usize = self.checkpoints.iter().map(|c| std::mem::size_of::<Checkpoint>() + v * (c.x.len() + c.v.len())).sum();
+        let checkpoints: usize = self
+            .checkpoints
+            .iter()
+            .map(|c| std::mem::size_of::<Checkpoint>() + v * (c.x.len() + c.v.len()))
+            .sum();
         let inputs: usize = self
             .inputs
             .iter()
             .map(|i| {
                 std::mem::size_of::<StepInputs>()
-                    + v * (i.targets.as_ref().map_or(0, Vec::len) + i.forces.as_ref().map_or(0, Vec::len))
+                    + v * (i.targets.as_ref().map_or(0, Vec::len)
+                        + i.forces.as_ref().map_or(0, Vec::len))
             })
             .sum();
         self.records.iter().map(StepRecord::bytes).sum::<usize>() + checkpoints + inputs

@@ -23,13 +23,22 @@ pub fn random_vectors(n: usize, amp: f64, seed: u64) -> Vec<Vec3> {
         s ^= s << 17;
         (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
     };
-    (0..n).map(|_| Vec3::new(next(), next(), next()) * amp).collect()
+    (0..n)
+        .map(|_| Vec3::new(next(), next(), next()) * amp)
+        .collect()
 }
 
 pub fn momentum(sim: &Simulator) -> Vec3 {
-    sim.velocities().iter().zip(sim.masses()).map(|(v, m)| *m * v).sum()
+    sim.velocities()
+        .iter()
+        .zip(sim.masses())
+        .map(|(v, m)| *m * v)
+        .sum()
 }
 
 pub fn max_distance(a: &[Vec3], b: &[Vec3]) -> f64 {
-    a.iter().zip(b).map(|(p, q)| (p - q).norm()).fold(0.0, f64::max)
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (p - q).norm())
+        .fold(0.0, f64::max)
 }

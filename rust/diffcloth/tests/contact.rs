@@ -43,7 +43,11 @@ fn assert_impulses_in_the_cone(sim: &Simulator) {
         let jn = c.impulse.dot(&c.normal);
         let jt = (c.impulse - jn * c.normal).norm();
         assert!(jn >= -1e-12, "normal impulse pulls: {jn}");
-        assert!(jt <= c.mu * jn * (1.0 + 1e-9) + 1e-15, "outside the Coulomb cone: {jt} > {} * {jn}", c.mu);
+        assert!(
+            jt <= c.mu * jn * (1.0 + 1e-9) + 1e-15,
+            "outside the Coulomb cone: {jt} > {} * {jn}",
+            c.mu
+        );
     }
 }
 
@@ -55,7 +59,11 @@ fn cloth_sticks_on_an_incline_below_the_friction_angle() {
     for _ in 0..100 {
         let stats = sim.step(StepInput::default()).unwrap();
         assert!(stats.converged);
-        assert_eq!(stats.contacts.stick, 25, "every node sticks: {:?}", stats.contacts);
+        assert_eq!(
+            stats.contacts.stick, 25,
+            "every node sticks: {:?}",
+            stats.contacts
+        );
         assert_impulses_in_the_cone(&sim);
     }
     let moved = max_distance(sim.positions(), &start);
@@ -69,14 +77,21 @@ fn cloth_slides_down_an_incline_with_coulomb_acceleration() {
     let mut sim = incline(40.0, mu);
     for _ in 0..steps {
         let stats = sim.step(StepInput::default()).unwrap();
-        assert_eq!(stats.contacts.slip, 25, "every node slips: {:?}", stats.contacts);
+        assert_eq!(
+            stats.contacts.slip, 25,
+            "every node slips: {:?}",
+            stats.contacts
+        );
         assert_impulses_in_the_cone(&sim);
     }
     let downhill = Vec3::new(-theta.cos(), -theta.sin(), 0.0);
     let mean_v: Vec3 = sim.velocities().iter().sum::<Vec3>() / sim.num_nodes() as f64;
     let expected = 9.8 * (theta.sin() - mu * theta.cos()) * steps as f64 * h;
     let speed = mean_v.dot(&downhill);
-    assert!((speed - expected).abs() < 0.02 * expected, "speed {speed} vs {expected}");
+    assert!(
+        (speed - expected).abs() < 0.02 * expected,
+        "speed {speed} vs {expected}"
+    );
     // It stays on the plane: no velocity along the normal.
     let normal = Vec3::new(-theta.sin(), theta.cos(), 0.0);
     assert!(mean_v.dot(&normal).abs() < 1e-6 * expected);
@@ -118,11 +133,18 @@ const PLANE: &str = r#"{ kind = "plane", point = [0.0, 0.5, 0.0], normal = [0.0,
 
 fn min_distance(sim: &Simulator) -> f64 {
     let o = &sim.obstacles()[0];
-    sim.positions().iter().map(|p| o.query(p, sim.time()).0).fold(f64::INFINITY, f64::min)
+    sim.positions()
+        .iter()
+        .map(|p| o.query(p, sim.time()).0)
+        .fold(f64::INFINITY, f64::min)
 }
 
 fn kinetic(sim: &Simulator) -> f64 {
-    sim.velocities().iter().zip(sim.masses()).map(|(v, m)| 0.5 * m * v.norm_squared()).sum()
+    sim.velocities()
+        .iter()
+        .zip(sim.masses())
+        .map(|(v, m)| 0.5 * m * v.norm_squared())
+        .sum()
 }
 
 #[test]
@@ -134,12 +156,21 @@ fn napkin_on_a_sphere_and_a_plane_never_penetrates_and_comes_to_rest() {
         for step in 0..400 {
             sim.step(StepInput::default()).unwrap();
             let d = min_distance(&sim);
-            assert!(d > -thickness, "{shape}: node {d} below the surface at step {step}");
+            assert!(
+                d > -thickness,
+                "{shape}: node {d} below the surface at step {step}"
+            );
             peak = peak.max(kinetic(&sim));
         }
-        assert!(sim.profile().contacts_stick + sim.profile().contacts_slip > 0, "{shape}: it touched");
+        assert!(
+            sim.profile().contacts_stick + sim.profile().contacts_slip > 0,
+            "{shape}: it touched"
+        );
         let k = kinetic(&sim);
-        assert!(k < 1e-4 * peak, "{shape}: still moving, kinetic {k} vs peak {peak}");
+        assert!(
+            k < 1e-4 * peak,
+            "{shape}: still moving, kinetic {k} vs peak {peak}"
+        );
     }
 }
 
@@ -152,8 +183,16 @@ fn frictionless_cloth_slides_off_a_sphere_and_sticky_cloth_stays() {
         sticky.step(StepInput::default()).unwrap();
     }
     let centroid = |s: &Simulator| s.positions().iter().sum::<Vec3>() / s.num_nodes() as f64;
-    assert!(centroid(&slippery).y < -0.3, "slid off: {:?}", centroid(&slippery));
-    assert!(centroid(&sticky).y > 0.0, "stayed on top: {:?}", centroid(&sticky));
+    assert!(
+        centroid(&slippery).y < -0.3,
+        "slid off: {:?}",
+        centroid(&slippery)
+    );
+    assert!(
+        centroid(&sticky).y > 0.0,
+        "stayed on top: {:?}",
+        centroid(&sticky)
+    );
     // The nodes touching the sphere have stopped.
     let touching: Vec<usize> = sticky
         .contacts()
@@ -167,7 +206,11 @@ fn frictionless_cloth_slides_off_a_sphere_and_sticky_cloth_stays() {
     assert!(!touching.is_empty());
     for j in touching {
         // Peak speeds are ~2 m/s; what remains is the gap closing and the solver tolerance.
-        assert!(sticky.velocities()[j].norm() < 1e-4, "node {j} moves: {}", sticky.velocities()[j].norm());
+        assert!(
+            sticky.velocities()[j].norm() < 1e-4,
+            "node {j} moves: {}",
+            sticky.velocities()[j].norm()
+        );
     }
 }
 
@@ -185,11 +228,17 @@ fn final_velocities_are_continuous_in_mu() {
             sim.velocities().to_vec()
         })
         .collect();
-    let diffs: Vec<f64> = finals.windows(2).map(|w| max_distance(&w[0], &w[1])).collect();
+    let diffs: Vec<f64> = finals
+        .windows(2)
+        .map(|w| max_distance(&w[0], &w[1]))
+        .collect();
     let mean = diffs.iter().sum::<f64>() / diffs.len() as f64;
     let worst = diffs.iter().cloned().fold(0.0, f64::max);
     assert!(mean > 0.0, "mu has an effect");
-    assert!(worst < 4.0 * mean, "a jump in mu: worst {worst} vs mean {mean} ({diffs:?})");
+    assert!(
+        worst < 4.0 * mean,
+        "a jump in mu: worst {worst} vs mean {mean} ({diffs:?})"
+    );
 }
 
 /// A ribbon folded over itself falls onto a table. With self-collision the layers keep the
@@ -202,7 +251,11 @@ fn folded_cloth_does_not_interpenetrate_with_self_collision() {
         } else {
             r#"["gravity", "stretch", "obstacle_contact", "friction"]"#
         };
-        let table = if self_collision { "[self_collision]\nradius = 0.04\nmu = 0.1\n" } else { "" };
+        let table = if self_collision {
+            "[self_collision]\nradius = 0.04\nmu = 0.1\n"
+        } else {
+            ""
+        };
         let mut sim = sim_from_toml(&format!(
             r#"
 h = 0.01
@@ -270,11 +323,17 @@ max_iterations = 3000
         on.step(StepInput::default()).unwrap();
         off.step(StepInput::default()).unwrap();
         let d = closest_pair(&on, &non_adjacent);
-        assert!(d > sc_radius - 0.01, "step {step}: pair at {d} < radius {sc_radius}");
+        assert!(
+            d > sc_radius - 0.01,
+            "step {step}: pair at {d} < radius {sc_radius}"
+        );
     }
     assert!(on.profile().contacts_stick + on.profile().contacts_slip > 0);
     let d_off = closest_pair(&off, &non_adjacent);
-    assert!(d_off < 0.5 * sc_radius, "without self-collision the layers meet: {d_off}");
+    assert!(
+        d_off < 0.5 * sc_radius,
+        "without self-collision the layers meet: {d_off}"
+    );
 }
 
 #[test]
@@ -314,7 +373,10 @@ fn napkin_in_a_bowl_keeps_its_area() {
 }
 
 fn sim_area(triangles: &[[usize; 3]], x: &[Vec3]) -> f64 {
-    triangles.iter().map(|t| 0.5 * (x[t[1]] - x[t[0]]).cross(&(x[t[2]] - x[t[0]])).norm()).sum()
+    triangles
+        .iter()
+        .map(|t| 0.5 * (x[t[1]] - x[t[0]]).cross(&(x[t[2]] - x[t[0]])).norm())
+        .sum()
 }
 
 /// A prescribed obstacle motion carries the cloth: on a plane rising at 0.5 m/s and sliding
@@ -354,7 +416,10 @@ max_iterations = 2000
         assert!((v - Vec3::new(0.2, 0.5, 0.0)).norm() < 1e-6, "{v:?}");
     }
     let lowest = min_distance(&sim);
-    assert!((lowest - 0.01).abs() < 1e-6, "rides at the contact thickness: {lowest}");
+    assert!(
+        (lowest - 0.01).abs() < 1e-6,
+        "rides at the contact thickness: {lowest}"
+    );
 }
 
 /// Paper Fig. 2 for a loss: sweeping mu across the stick/slip threshold of an incline
@@ -399,13 +464,31 @@ max_iterations = 2000
             sim.step(StepInput::default()).unwrap();
         }
         let downhill = Vec3::new(-t.cos(), -t.sin(), 0.0);
-        sim.positions().iter().zip(&start).map(|(p, s)| (p - s).dot(&downhill)).sum::<f64>() / start.len() as f64
+        sim.positions()
+            .iter()
+            .zip(&start)
+            .map(|(p, s)| (p - s).dot(&downhill))
+            .sum::<f64>()
+            / start.len() as f64
     };
     let coarse: Vec<f64> = (0..=20).map(|k| travel(0.45 + 0.01 * k as f64)).collect();
     let fine: Vec<f64> = (0..=20).map(|k| travel(0.55 + 0.002 * k as f64)).collect();
-    let max_step = |v: &[f64]| v.windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max);
+    let max_step = |v: &[f64]| {
+        v.windows(2)
+            .map(|w| (w[1] - w[0]).abs())
+            .fold(0.0, f64::max)
+    };
     // Lipschitz in mu: a 5x finer sweep across the switch gives ~5x smaller steps (a jump would not shrink).
-    assert!(max_step(&fine) < 0.35 * max_step(&coarse), "fine {} coarse {}", max_step(&fine), max_step(&coarse));
+    assert!(
+        max_step(&fine) < 0.35 * max_step(&coarse),
+        "fine {} coarse {}",
+        max_step(&fine),
+        max_step(&coarse)
+    );
     assert!(coarse[0] > 0.01, "slides at mu = 0.45: {}", coarse[0]);
-    assert!(coarse[20].abs() < 1e-6, "sticks at mu = 0.65: {}", coarse[20]);
+    assert!(
+        coarse[20].abs() < 1e-6,
+        "sticks at mu = 0.65: {}",
+        coarse[20]
+    );
 }

@@ -32,7 +32,10 @@ fn free_fall_matches_the_implicit_euler_closed_form() {
             let x = x0[i] + nf * h * v0[i] + h * h * g * nf * (nf + 1.0) / 2.0;
             let v = v0[i] + nf * h * g;
             assert!((sim.positions()[i] - x).norm() < 1e-10, "step {n} node {i}");
-            assert!((sim.velocities()[i] - v).norm() < 1e-10, "step {n} node {i}");
+            assert!(
+                (sim.velocities()[i] - v).norm() < 1e-10,
+                "step {n} node {i}"
+            );
         }
     }
 }
@@ -66,11 +69,18 @@ strain_limits = [0.95, 1.05]
     let p0 = momentum(&sim);
     for _ in 0..200 {
         sim.step(StepInput::default()).unwrap();
-        assert!((momentum(&sim) - p0).norm() < 1e-9, "{:?} vs {:?}", momentum(&sim), p0);
+        assert!(
+            (momentum(&sim) - p0).norm() < 1e-9,
+            "{:?} vs {:?}",
+            momentum(&sim),
+            p0
+        );
     }
     // The cloth did deform (the test is not vacuous).
     let stretches = sim.stretch().unwrap().principal_stretches(sim.positions());
-    assert!(stretches.iter().any(|&(s1, s2)| (s1 - 1.0).abs() > 1e-3 || (s2 - 1.0).abs() > 1e-3));
+    assert!(stretches
+        .iter()
+        .any(|&(s1, s2)| (s1 - 1.0).abs() > 1e-3 || (s2 - 1.0).abs() > 1e-3));
 }
 
 /// A horizontal napkin pinned at two corners swings down: implicit Euler dissipates, so the
@@ -111,21 +121,35 @@ max_iterations = 2000
         let stats = sim.step(StepInput::default()).unwrap();
         assert!(stats.converged, "step {step} did not converge: {stats:?}");
         let e = sim.mechanical_energy();
-        assert!(e <= energy + 1e-9 * initial.abs().max(1.0), "energy grew at step {step}: {energy} -> {e}");
+        assert!(
+            e <= energy + 1e-9 * initial.abs().max(1.0),
+            "energy grew at step {step}: {energy} -> {e}"
+        );
         energy = e;
         for (s1, s2) in sim.stretch().unwrap().principal_stretches(sim.positions()) {
             max_stretch = max_stretch.max(s1);
             min_stretch = min_stretch.min(s2);
         }
     }
-    let kinetic: f64 = sim.velocities().iter().zip(sim.masses()).map(|(v, m)| 0.5 * m * v.norm_squared()).sum();
+    let kinetic: f64 = sim
+        .velocities()
+        .iter()
+        .zip(sim.masses())
+        .map(|(v, m)| 0.5 * m * v.norm_squared())
+        .sum();
     let dropped = initial - energy;
     assert!(dropped > 0.1, "the napkin must have fallen: {dropped}");
     assert!(kinetic < 1e-6 * dropped, "still moving: kinetic {kinetic}");
     let centroid_y = sim.positions().iter().map(|p| p.y).sum::<f64>() / sim.num_nodes() as f64;
-    assert!(centroid_y < pins_y - 0.4, "hangs below the pins: {centroid_y} vs {pins_y}");
+    assert!(
+        centroid_y < pins_y - 0.4,
+        "hangs below the pins: {centroid_y} vs {pins_y}"
+    );
     // Soft constraints: allow 1 % beyond the limits (the stiff case, k = 2000, load ~ 2 N/m).
-    assert!(max_stretch < 1.1 + 0.01 && min_stretch > 0.9 - 0.01, "stretch in [{min_stretch}, {max_stretch}]");
+    assert!(
+        max_stretch < 1.1 + 0.01 && min_stretch > 0.9 - 0.01,
+        "stretch in [{min_stretch}, {max_stretch}]"
+    );
 }
 
 /// Wind and per-node forces are impulses: with internal forces only otherwise, the momentum
@@ -158,24 +182,45 @@ per_area = true
     for step in 0..20 {
         let t = sim.time();
         let p0 = momentum(&sim);
-        sim.step(StepInput { attachment_targets: None, external_forces: Some(&ext) }).unwrap();
+        sim.step(StepInput {
+            attachment_targets: None,
+            external_forces: Some(&ext),
+        })
+        .unwrap();
         // Total wind: 0.5 (sin(omega t + phi) + 1) d times the total area (1 m^2).
         let wind = 0.5 * ((3.0 * t + 0.5f64).sin() + 1.0) * Vec3::new(0.0, 0.0, 2.0);
         let expected = 0.01 * (wind + ext.iter().sum::<Vec3>());
-        assert!((momentum(&sim) - p0 - expected).norm() < 1e-12, "step {step}");
+        assert!(
+            (momentum(&sim) - p0 - expected).norm() < 1e-12,
+            "step {step}"
+        );
     }
 }
 
 /// Attachment targets are the actions: a pinned node follows its moving target.
 #[test]
 fn attached_nodes_follow_their_targets_without_refactoring() {
-    let mut sim = sim_from_toml(&format!("{GRID_6}\n{}", "[attachments]\nstiffness = 1e6\nnodes = [0, 5]\n")
-        .replace(r#"effects = ["gravity"]"#, r#"effects = ["gravity", "stretch", "attachments"]"#)
-        .replace("density = 0.3", "density = 0.3\nk_stretch = 100.0"));
+    let mut sim = sim_from_toml(
+        &format!(
+            "{GRID_6}\n{}",
+            "[attachments]\nstiffness = 1e6\nnodes = [0, 5]\n"
+        )
+        .replace(
+            r#"effects = ["gravity"]"#,
+            r#"effects = ["gravity", "stretch", "attachments"]"#,
+        )
+        .replace("density = 0.3", "density = 0.3\nk_stretch = 100.0"),
+    );
     let mut targets = sim.attachment_targets().to_vec();
     for _ in 0..50 {
-        targets.iter_mut().for_each(|t| *t += Vec3::new(0.01, 0.02, 0.0));
-        sim.step(StepInput { attachment_targets: Some(&targets), external_forces: None }).unwrap();
+        targets
+            .iter_mut()
+            .for_each(|t| *t += Vec3::new(0.01, 0.02, 0.0));
+        sim.step(StepInput {
+            attachment_targets: Some(&targets),
+            external_forces: None,
+        })
+        .unwrap();
     }
     for (k, &j) in sim.attachment_nodes().to_vec().iter().enumerate() {
         assert!((sim.positions()[j] - targets[k]).norm() < 5e-3);
@@ -186,14 +231,31 @@ fn attached_nodes_follow_their_targets_without_refactoring() {
 /// Only h, density and stiffness changes refactor the matrix; other parameters do not.
 #[test]
 fn set_params_refactors_only_when_the_matrix_changes() {
-    let mut sim = sim_from_toml(&GRID_6.replace(r#"["gravity"]"#, r#"["gravity", "stretch"]"#).replace("density = 0.3", "density = 0.3\nk_stretch = 10.0"));
+    let mut sim = sim_from_toml(
+        &GRID_6
+            .replace(r#"["gravity"]"#, r#"["gravity", "stretch"]"#)
+            .replace("density = 0.3", "density = 0.3\nk_stretch = 10.0"),
+    );
     let base = sim.params().clone();
-    sim.set_params(Params { gravity: Vec3::new(0.0, -1.0, 0.0), ..base.clone() }).unwrap();
+    sim.set_params(Params {
+        gravity: Vec3::new(0.0, -1.0, 0.0),
+        ..base.clone()
+    })
+    .unwrap();
     assert_eq!(sim.profile().refactorizations, 0);
-    sim.set_params(Params { k_stretch: 20.0, ..base.clone() }).unwrap();
+    sim.set_params(Params {
+        k_stretch: 20.0,
+        ..base.clone()
+    })
+    .unwrap();
     assert_eq!(sim.profile().refactorizations, 1);
     // Bad values are rejected and leave the simulator as it was.
-    let err = sim.set_params(Params { k_stretch: -1.0, ..base.clone() }).unwrap_err();
+    let err = sim
+        .set_params(Params {
+            k_stretch: -1.0,
+            ..base.clone()
+        })
+        .unwrap_err();
     assert!(err.to_string().contains("k_stretch"), "{err}");
     assert_eq!(sim.params().k_stretch, 20.0);
     sim.step(StepInput::default()).unwrap();
@@ -205,11 +267,20 @@ fn bad_step_input_is_rejected_and_state_kept() {
     let mut sim = sim_from_toml(GRID_6);
     let before = sim.positions().to_vec();
     let short = vec![Vec3::zeros(); 3];
-    let err = sim.step(StepInput { attachment_targets: None, external_forces: Some(&short) }).unwrap_err();
+    let err = sim
+        .step(StepInput {
+            attachment_targets: None,
+            external_forces: Some(&short),
+        })
+        .unwrap_err();
     assert!(err.to_string().contains("external forces"), "{err}");
     let mut nan = vec![Vec3::zeros(); sim.num_nodes()];
     nan[4].y = f64::NAN;
-    assert!(sim.reset(Some(&nan), None).unwrap_err().to_string().contains("row 4"));
+    assert!(sim
+        .reset(Some(&nan), None)
+        .unwrap_err()
+        .to_string()
+        .contains("row 4"));
     assert_eq!(sim.positions(), &before[..]);
     sim.step(StepInput::default()).unwrap();
 }

@@ -38,7 +38,10 @@ fn run(sim: &mut Simulator, r: &Rollout, loss: &Loss, record: bool) -> f64 {
             external_forces: (!r.forces[n].is_empty()).then_some(&r.forces[n][..]),
         };
         let stats = sim.step(input).unwrap();
-        assert!(stats.residual < 1e-11, "forward must converge for the check: {stats:?}");
+        assert!(
+            stats.residual < 1e-11,
+            "forward must converge for the check: {stats:?}"
+        );
         // Every perturbed rollout must keep the base rollout's contact branches.
         let branches: Vec<diffcloth::Branch> = sim.contacts().iter().map(|c| c.branch).collect();
         BRANCHES.with(|b| {
@@ -46,11 +49,24 @@ fn run(sim: &mut Simulator, r: &Rollout, loss: &Loss, record: bool) -> f64 {
             if record {
                 b.push(branches);
             } else {
-                assert_eq!(b[n], branches, "a perturbation switched a contact branch at step {n}");
+                assert_eq!(
+                    b[n], branches,
+                    "a perturbation switched a contact branch at step {n}"
+                );
             }
         });
-        total += sim.positions().iter().zip(&loss.a[n]).map(|(x, a)| x.dot(a)).sum::<f64>();
-        total += sim.velocities().iter().zip(&loss.b[n]).map(|(v, b)| v.dot(b)).sum::<f64>();
+        total += sim
+            .positions()
+            .iter()
+            .zip(&loss.a[n])
+            .map(|(x, a)| x.dot(a))
+            .sum::<f64>();
+        total += sim
+            .velocities()
+            .iter()
+            .zip(&loss.b[n])
+            .map(|(v, b)| v.dot(b))
+            .sum::<f64>();
     }
     total
 }
@@ -63,39 +79,82 @@ fn dot(a: &[Vec3], b: &[Vec3]) -> f64 {
 /// x0 when every node sticks: the positions are then fixed by x_n and the obstacle).
 fn check(name: &str, analytic: f64, fd: f64) {
     let err = (analytic - fd).abs() / fd.abs().max(analytic.abs()).max(1e-3);
-    assert!(err < 1e-5, "{name}: analytic {analytic:.10e} vs fd {fd:.10e} (rel {err:.1e})");
+    assert!(
+        err < 1e-5,
+        "{name}: analytic {analytic:.10e} vs fd {fd:.10e} (rel {err:.1e})"
+    );
 }
 
 /// Checks every gradient group by a directional central difference.
-fn check_all_gradients(sim: &mut Simulator, base: &Rollout, steps: usize, solvers: &[AdjointSolver], eps_factor: f64) {
+fn check_all_gradients(
+    sim: &mut Simulator,
+    base: &Rollout,
+    steps: usize,
+    solvers: &[AdjointSolver],
+    eps_factor: f64,
+) {
     let strict_fixed_point = base.mu.is_none();
     let n = sim.num_nodes();
     let loss = Loss {
-        a: (0..steps).map(|k| random_vectors(n, 1.0, 100 + k as u64)).collect(),
-        b: (0..steps).map(|k| random_vectors(n, 0.1, 200 + k as u64)).collect(),
+        a: (0..steps)
+            .map(|k| random_vectors(n, 1.0, 100 + k as u64))
+            .collect(),
+        b: (0..steps)
+            .map(|k| random_vectors(n, 0.1, 200 + k as u64))
+            .collect(),
     };
     BRANCHES.with(|b| b.borrow_mut().clear());
     run(sim, base, &loss, true);
     let mut reference = None;
     for &solver in solvers {
         let g = sim
-            .backward(&loss.a, &loss.b, &BackwardOptions { solver, tolerance: 1e-10, max_iterations: 2000 })
+            .backward(
+                &loss.a,
+                &loss.b,
+                &BackwardOptions {
+                    solver,
+                    tolerance: 1e-10,
+                    max_iterations: 2000,
+                },
+            )
             .unwrap();
         // The paper's fixed-point iteration may legitimately diverge (spectral radius >= 1,
         // e.g. with sticking contact) and fall back; the other solvers must not.
         if solver != AdjointSolver::FixedPoint || !strict_fixed_point {
-            assert!(solver == AdjointSolver::FixedPoint || g.steps.iter().all(|s| !s.fell_back), "{solver:?} fell back: {:?}", g.steps);
+            assert!(
+                solver == AdjointSolver::FixedPoint || g.steps.iter().all(|s| !s.fell_back),
+                "{solver:?} fell back: {:?}",
+                g.steps
+            );
         } else {
-            assert!(g.steps.iter().all(|s| !s.fell_back), "{solver:?} fell back: {:?}", g.steps);
+            assert!(
+                g.steps.iter().all(|s| !s.fell_back),
+                "{solver:?} fell back: {:?}",
+                g.steps
+            );
         }
         match &reference {
             None => reference = Some(g),
             Some(r) => {
                 let rel = |a: &[Vec3], b: &[Vec3]| {
-                    a.iter().zip(b).map(|(x, y)| (x - y).norm_squared()).sum::<f64>().sqrt()
-                        / b.iter().map(|y| y.norm_squared()).sum::<f64>().sqrt().max(1e-3)
+                    a.iter()
+                        .zip(b)
+                        .map(|(x, y)| (x - y).norm_squared())
+                        .sum::<f64>()
+                        .sqrt()
+                        / b.iter()
+                            .map(|y| y.norm_squared())
+                            .sum::<f64>()
+                            .sqrt()
+                            .max(1e-3)
                 };
-                assert!(rel(&g.v0, &r.v0) < 1e-6, "{solver:?} vs first solver: {} (residuals {:?} vs {:?})", rel(&g.v0, &r.v0), g.steps.iter().map(|s| s.residual).collect::<Vec<_>>(), r.steps.iter().map(|s| s.residual).collect::<Vec<_>>());
+                assert!(
+                    rel(&g.v0, &r.v0) < 1e-6,
+                    "{solver:?} vs first solver: {} (residuals {:?} vs {:?})",
+                    rel(&g.v0, &r.v0),
+                    g.steps.iter().map(|s| s.residual).collect::<Vec<_>>(),
+                    r.steps.iter().map(|s| s.residual).collect::<Vec<_>>()
+                );
                 assert!(rel(&g.x0, &r.x0) < 1e-6);
             }
         }
@@ -113,51 +172,121 @@ fn check_all_gradients(sim: &mut Simulator, base: &Rollout, steps: usize, solver
         (run(sim, &p, &loss, false) - run(sim, &m, &loss, false)) / (2.0 * eps)
     };
     let dx = random_vectors(n, 1.0, 7);
-    check("x0", dot(&g.x0, &dx), fd(1e-5, &|r, e| r.x0.iter_mut().zip(&dx).for_each(|(x, d)| *x += e * d)));
-    check("v0", dot(&g.v0, &dx), fd(1e-3, &|r, e| r.v0.iter_mut().zip(&dx).for_each(|(v, d)| *v += e * d)));
+    check(
+        "x0",
+        dot(&g.x0, &dx),
+        fd(1e-5, &|r, e| {
+            r.x0.iter_mut().zip(&dx).for_each(|(x, d)| *x += e * d)
+        }),
+    );
+    check(
+        "v0",
+        dot(&g.v0, &dx),
+        fd(1e-3, &|r, e| {
+            r.v0.iter_mut().zip(&dx).for_each(|(v, d)| *v += e * d)
+        }),
+    );
     if !base.targets[0].is_empty() {
-        let dt: Vec<Vec<Vec3>> = (0..steps).map(|k| random_vectors(base.targets[0].len(), 1.0, 300 + k as u64)).collect();
-        let analytic: f64 = (0..steps).map(|k| dot(&g.attachment_targets[k], &dt[k])).sum();
-        check("attachment targets", analytic, fd(1e-4, &|r, e| {
-            for (t, d) in r.targets.iter_mut().zip(&dt) {
-                t.iter_mut().zip(d).for_each(|(x, dd)| *x += e * dd);
-            }
-        }));
+        let dt: Vec<Vec<Vec3>> = (0..steps)
+            .map(|k| random_vectors(base.targets[0].len(), 1.0, 300 + k as u64))
+            .collect();
+        let analytic: f64 = (0..steps)
+            .map(|k| dot(&g.attachment_targets[k], &dt[k]))
+            .sum();
+        check(
+            "attachment targets",
+            analytic,
+            fd(1e-4, &|r, e| {
+                for (t, d) in r.targets.iter_mut().zip(&dt) {
+                    t.iter_mut().zip(d).for_each(|(x, dd)| *x += e * dd);
+                }
+            }),
+        );
         let ka = base.params.k_attach;
-        check("k_attach", g.k_attach * ka, fd(1e-4, &|r, e| r.params.k_attach += e * ka));
+        check(
+            "k_attach",
+            g.k_attach * ka,
+            fd(1e-4, &|r, e| r.params.k_attach += e * ka),
+        );
     }
     if !base.forces[0].is_empty() {
         // Force directions scaled by the node masses: equal accelerations on every node.
         let df: Vec<Vec<Vec3>> = (0..steps)
-            .map(|k| random_vectors(n, 1.0, 400 + k as u64).iter().zip(&masses).map(|(d, m)| d * (*m / 0.01)).collect())
+            .map(|k| {
+                random_vectors(n, 1.0, 400 + k as u64)
+                    .iter()
+                    .zip(&masses)
+                    .map(|(d, m)| d * (*m / 0.01))
+                    .collect()
+            })
             .collect();
         let analytic: f64 = (0..steps).map(|k| dot(&g.external_forces[k], &df[k])).sum();
-        check("external forces", analytic, fd(1e-4, &|r, e| {
-            for (f, d) in r.forces.iter_mut().zip(&df) {
-                f.iter_mut().zip(d).for_each(|(x, dd)| *x += e * dd);
-            }
-        }));
+        check(
+            "external forces",
+            analytic,
+            fd(1e-4, &|r, e| {
+                for (f, d) in r.forces.iter_mut().zip(&df) {
+                    f.iter_mut().zip(d).for_each(|(x, dd)| *x += e * dd);
+                }
+            }),
+        );
     }
     let scale = |v: f64| v.abs().max(1.0);
-    let (ks, kb, rho) = (scale(base.params.k_stretch), scale(base.params.k_bend), base.params.density);
-    check("k_stretch", g.k_stretch * ks, fd(1e-4, &|r, e| r.params.k_stretch += e * ks));
+    let (ks, kb, rho) = (
+        scale(base.params.k_stretch),
+        scale(base.params.k_bend),
+        base.params.density,
+    );
+    check(
+        "k_stretch",
+        g.k_stretch * ks,
+        fd(1e-4, &|r, e| r.params.k_stretch += e * ks),
+    );
     if effects.bend {
-        check("k_bend", g.k_bend * kb, fd(1e-4, &|r, e| r.params.k_bend += e * kb));
+        check(
+            "k_bend",
+            g.k_bend * kb,
+            fd(1e-4, &|r, e| r.params.k_bend += e * kb),
+        );
     }
-    check("density", g.density * rho, fd(1e-4, &|r, e| r.params.density += e * rho));
+    check(
+        "density",
+        g.density * rho,
+        fd(1e-4, &|r, e| r.params.density += e * rho),
+    );
     if effects.gravity {
         let dg = Vec3::new(0.3, -1.0, 0.2);
-        check("gravity", g.gravity.dot(&dg), fd(1e-3, &|r, e| r.params.gravity += e * dg));
+        check(
+            "gravity",
+            g.gravity.dot(&dg),
+            fd(1e-3, &|r, e| r.params.gravity += e * dg),
+        );
     }
     if let Some(mu) = base.mu {
-        check("mu", g.mu_obstacles[0] * mu, fd(1e-4, &|r, e| r.mu = Some(mu * (1.0 + e))));
+        check(
+            "mu",
+            g.mu_obstacles[0] * mu,
+            fd(1e-4, &|r, e| r.mu = Some(mu * (1.0 + e))),
+        );
     }
     if effects.wind {
         let dd = Vec3::new(0.5, 0.1, -0.7);
         let om = scale(base.params.wind_omega);
-        check("wind direction", g.wind_direction.dot(&dd), fd(1e-3, &|r, e| r.params.wind_direction += e * dd));
-        check("wind omega", g.wind_omega * om, fd(1e-4, &|r, e| r.params.wind_omega += e * om));
-        check("wind phi", g.wind_phi, fd(1e-3, &|r, e| r.params.wind_phi += e));
+        check(
+            "wind direction",
+            g.wind_direction.dot(&dd),
+            fd(1e-3, &|r, e| r.params.wind_direction += e * dd),
+        );
+        check(
+            "wind omega",
+            g.wind_omega * om,
+            fd(1e-4, &|r, e| r.params.wind_omega += e * om),
+        );
+        check(
+            "wind phi",
+            g.wind_phi,
+            fd(1e-3, &|r, e| r.params.wind_phi += e),
+        );
     }
 }
 
@@ -195,20 +324,48 @@ max_iterations = 20000
     let n = sim.num_nodes();
     let t0 = sim.attachment_targets().to_vec();
     let base = Rollout {
-        x0: sim.positions().iter().zip(random_vectors(n, 0.02, 1)).map(|(x, d)| x + d).collect(),
+        x0: sim
+            .positions()
+            .iter()
+            .zip(random_vectors(n, 0.02, 1))
+            .map(|(x, d)| x + d)
+            .collect(),
         v0: random_vectors(n, 0.5, 2),
-        targets: (0..steps).map(|k| t0.iter().map(|t| t + Vec3::new(0.01, 0.02, 0.03) * k as f64).collect()).collect(),
-        forces: (0..steps).map(|k| random_vectors(n, 0.01, 50 + k as u64)).collect(),
+        targets: (0..steps)
+            .map(|k| {
+                t0.iter()
+                    .map(|t| t + Vec3::new(0.01, 0.02, 0.03) * k as f64)
+                    .collect()
+            })
+            .collect(),
+        forces: (0..steps)
+            .map(|k| random_vectors(n, 0.01, 50 + k as u64))
+            .collect(),
         params: sim.params().clone(),
         mu: None,
     };
-    check_all_gradients(&mut sim, &base, steps, &[AdjointSolver::Direct, AdjointSolver::Krylov, AdjointSolver::FixedPoint], 1.0);
+    check_all_gradients(
+        &mut sim,
+        &base,
+        steps,
+        &[
+            AdjointSolver::Direct,
+            AdjointSolver::Krylov,
+            AdjointSolver::FixedPoint,
+        ],
+        1.0,
+    );
 }
 
 /// A shipped garment scene without its contact effects, solved with a fixed iteration count.
 fn contact_free_garment(name: &str, iterations: usize) -> Simulator {
     let mut cfg = load_config(name);
-    cfg.effects.retain(|e| !matches!(e, Effect::ObstacleContact | Effect::Friction | Effect::SelfCollision));
+    cfg.effects.retain(|e| {
+        !matches!(
+            e,
+            Effect::ObstacleContact | Effect::Friction | Effect::SelfCollision
+        )
+    });
     cfg.obstacles.clear();
     cfg.self_collision = None;
     cfg.contact = None;
@@ -229,12 +386,24 @@ fn gradients_match_finite_differences_on_the_hat() {
     let base = Rollout {
         x0: sim.positions().to_vec(),
         v0: random_vectors(n, 0.3, 5),
-        targets: (0..steps).map(|k| t0.iter().map(|t| t + Vec3::new(0.0, 0.02, 0.0) * k as f64).collect()).collect(),
+        targets: (0..steps)
+            .map(|k| {
+                t0.iter()
+                    .map(|t| t + Vec3::new(0.0, 0.02, 0.0) * k as f64)
+                    .collect()
+            })
+            .collect(),
         forces: vec![Vec::new(); steps],
         params: sim.params().clone(),
         mu: None,
     };
-    check_all_gradients(&mut sim, &base, steps, &[AdjointSolver::Direct, AdjointSolver::Krylov], 1.0);
+    check_all_gradients(
+        &mut sim,
+        &base,
+        steps,
+        &[AdjointSolver::Direct, AdjointSolver::Krylov],
+        1.0,
+    );
 }
 
 /// A 4x4 cloth on an obstacle with friction; `v0` chosen so one branch holds everywhere.
@@ -273,7 +442,9 @@ fn contact_rollout(sim: &Simulator, v0: Vec<Vec3>, steps: usize, mu: f64, force:
         x0: sim.positions().to_vec(),
         v0,
         targets: vec![Vec::new(); steps],
-        forces: (0..steps).map(|k| random_vectors(n, force, 60 + k as u64)).collect(),
+        forces: (0..steps)
+            .map(|k| random_vectors(n, force, 60 + k as u64))
+            .collect(),
         params: sim.params().clone(),
         mu: Some(mu),
     }
@@ -283,8 +454,15 @@ fn incline(theta_deg: f64) -> (String, String, Vec3, Vec3) {
     let t = theta_deg.to_radians();
     let n = Vec3::new(-t.sin(), t.cos(), 0.0);
     let downhill = Vec3::new(-t.cos(), -t.sin(), 0.0);
-    let shape = format!(r#"{{ kind = "plane", point = [0.0, 0.0, 0.0], normal = [{}, {}, 0.0] }}"#, n.x, n.y);
-    let placement = format!("rotate_deg = [0.0, 0.0, {theta_deg}]\ntranslate = [{}, {}, 0.0]", 0.01 * n.x, 0.01 * n.y);
+    let shape = format!(
+        r#"{{ kind = "plane", point = [0.0, 0.0, 0.0], normal = [{}, {}, 0.0] }}"#,
+        n.x, n.y
+    );
+    let placement = format!(
+        "rotate_deg = [0.0, 0.0, {theta_deg}]\ntranslate = [{}, {}, 0.0]",
+        0.01 * n.x,
+        0.01 * n.y
+    );
     (shape, placement, n, downhill)
 }
 
@@ -294,8 +472,21 @@ fn gradients_through_sticking_contact_match_finite_differences() {
     let mut sim = contact_scene(&shape, 0.6, &placement);
     let steps = 10;
     let base = contact_rollout(&sim, vec![Vec3::zeros(); sim.num_nodes()], steps, 0.6, 1e-4);
-    check_all_gradients(&mut sim, &base, steps, &[AdjointSolver::Direct, AdjointSolver::Krylov, AdjointSolver::FixedPoint], 1.0);
-    assert!(sim.contacts().iter().all(|c| c.branch == diffcloth::Branch::Stick));
+    check_all_gradients(
+        &mut sim,
+        &base,
+        steps,
+        &[
+            AdjointSolver::Direct,
+            AdjointSolver::Krylov,
+            AdjointSolver::FixedPoint,
+        ],
+        1.0,
+    );
+    assert!(sim
+        .contacts()
+        .iter()
+        .all(|c| c.branch == diffcloth::Branch::Stick));
 }
 
 #[test]
@@ -305,10 +496,31 @@ fn gradients_through_slipping_contact_match_finite_differences() {
     let steps = 10;
     let n = sim.num_nodes();
     // Sliding downhill and slightly sideways, with some spread between nodes.
-    let v0: Vec<Vec3> = random_vectors(n, 0.05, 9).iter().map(|d| 1.0 * downhill + Vec3::new(0.0, 0.0, 0.3) + Vec3::new(d.x, d.y, d.z) * 0.0 + Vec3::new(0.0, 0.0, d.z)).collect();
+    let v0: Vec<Vec3> = random_vectors(n, 0.05, 9)
+        .iter()
+        .map(|d| {
+            1.0 * downhill
+                + Vec3::new(0.0, 0.0, 0.3)
+                + Vec3::new(d.x, d.y, d.z) * 0.0
+                + Vec3::new(0.0, 0.0, d.z)
+        })
+        .collect();
     let base = contact_rollout(&sim, v0, steps, 0.3, 1e-3);
-    check_all_gradients(&mut sim, &base, steps, &[AdjointSolver::Direct, AdjointSolver::Krylov, AdjointSolver::FixedPoint], 1.0);
-    assert!(sim.contacts().iter().all(|c| c.branch == diffcloth::Branch::Slip));
+    check_all_gradients(
+        &mut sim,
+        &base,
+        steps,
+        &[
+            AdjointSolver::Direct,
+            AdjointSolver::Krylov,
+            AdjointSolver::FixedPoint,
+        ],
+        1.0,
+    );
+    assert!(sim
+        .contacts()
+        .iter()
+        .all(|c| c.branch == diffcloth::Branch::Slip));
 }
 
 /// On a sphere the contact frame depends on x_n (normal and gap): the frame terms.
@@ -318,17 +530,38 @@ fn gradients_through_slipping_contact_on_a_sphere_match_finite_differences() {
     let mut sim = contact_scene(shape, 0.2, "translate = [0.2, 1.01, 0.1]");
     let steps = 3;
     let n = sim.num_nodes();
-    let v0: Vec<Vec3> = random_vectors(n, 0.05, 4).iter().map(|d| Vec3::new(0.8, -0.1, 0.3) + d).collect();
+    let v0: Vec<Vec3> = random_vectors(n, 0.05, 4)
+        .iter()
+        .map(|d| Vec3::new(0.8, -0.1, 0.3) + d)
+        .collect();
     let base = contact_rollout(&sim, v0, steps, 0.2, 1e-3);
-    check_all_gradients(&mut sim, &base, steps, &[AdjointSolver::Direct, AdjointSolver::Krylov, AdjointSolver::FixedPoint], 1.0);
-    let active = sim.contacts().iter().filter(|c| c.branch == diffcloth::Branch::Slip).count();
+    check_all_gradients(
+        &mut sim,
+        &base,
+        steps,
+        &[
+            AdjointSolver::Direct,
+            AdjointSolver::Krylov,
+            AdjointSolver::FixedPoint,
+        ],
+        1.0,
+    );
+    let active = sim
+        .contacts()
+        .iter()
+        .filter(|c| c.branch == diffcloth::Branch::Slip)
+        .count();
     assert!(active >= 2, "nodes slide over the sphere: {active}");
 }
 
 #[test]
 fn backward_without_a_tape_is_an_error() {
     let mut sim = Simulator::from_toml_file(&configs_dir().join("slope.toml")).unwrap();
-    assert!(sim.backward(&[], &[], &BackwardOptions::default()).unwrap_err().to_string().contains("tape"));
+    assert!(sim
+        .backward(&[], &[], &BackwardOptions::default())
+        .unwrap_err()
+        .to_string()
+        .contains("tape"));
 }
 
 /// Writes two separate 0.3 m squares (nodes 0-3 at `bottom`, 4-7 at `top`) as an OBJ file in
@@ -380,21 +613,63 @@ max_iterations = 300
     ));
     let steps = 4;
     let n = sim.num_nodes();
-    let v0: Vec<Vec3> = (0..n).map(|i| if i >= 4 { Vec3::new(0.5, -0.8, 0.2) } else { Vec3::zeros() }).collect();
+    let v0: Vec<Vec3> = (0..n)
+        .map(|i| {
+            if i >= 4 {
+                Vec3::new(0.5, -0.8, 0.2)
+            } else {
+                Vec3::zeros()
+            }
+        })
+        .collect();
     let mut base = contact_rollout(&sim, v0, steps, 0.1, 1e-4);
     base.mu = None; // no obstacle: the self mu is checked below
-    // Targets given explicitly (reset() would move them with a perturbed x0).
+                    // Targets given explicitly (reset() would move them with a perturbed x0).
     base.targets = vec![sim.attachment_targets().to_vec(); steps];
-    check_all_gradients(&mut sim, &base, steps, &[AdjointSolver::Direct, AdjointSolver::Krylov], 1.0);
+    check_all_gradients(
+        &mut sim,
+        &base,
+        steps,
+        &[AdjointSolver::Direct, AdjointSolver::Krylov],
+        1.0,
+    );
     // The self-contact friction gradient against a finite difference.
     let loss = Loss {
-        a: (0..steps).map(|k| random_vectors(n, 1.0, 100 + k as u64)).collect(),
-        b: (0..steps).map(|k| random_vectors(n, 0.1, 200 + k as u64)).collect(),
+        a: (0..steps)
+            .map(|k| random_vectors(n, 1.0, 100 + k as u64))
+            .collect(),
+        b: (0..steps)
+            .map(|k| random_vectors(n, 0.1, 200 + k as u64))
+            .collect(),
     };
     run(&mut sim, &base, &loss, true);
-    let slips: usize = sim.tape().unwrap().records.iter().map(|r| r.contacts.iter().filter(|c| c.branch == diffcloth::Branch::Slip).count()).sum();
-    assert!(slips >= 4, "the top nodes slip on the nodes below: {slips} slip contacts");
-    let g = sim.backward(&loss.a, &loss.b, &BackwardOptions { solver: AdjointSolver::Direct, tolerance: 1e-10, max_iterations: 500 }).unwrap();
+    let slips: usize = sim
+        .tape()
+        .unwrap()
+        .records
+        .iter()
+        .map(|r| {
+            r.contacts
+                .iter()
+                .filter(|c| c.branch == diffcloth::Branch::Slip)
+                .count()
+        })
+        .sum();
+    assert!(
+        slips >= 4,
+        "the top nodes slip on the nodes below: {slips} slip contacts"
+    );
+    let g = sim
+        .backward(
+            &loss.a,
+            &loss.b,
+            &BackwardOptions {
+                solver: AdjointSolver::Direct,
+                tolerance: 1e-10,
+                max_iterations: 500,
+            },
+        )
+        .unwrap();
     let eps = 1e-4;
     let mut at = |mu: f64| {
         sim.set_self_mu(mu).unwrap();
@@ -414,7 +689,9 @@ fn checkpointed_and_full_tapes_give_identical_gradients() {
     let mut sim = Simulator::from_toml_file(&configs_dir().join("slope.toml")).unwrap();
     let steps = 23;
     let n = sim.num_nodes();
-    let w: Vec<Vec<Vec3>> = (0..steps).map(|k| random_vectors(n, 1.0, 500 + k as u64)).collect();
+    let w: Vec<Vec<Vec3>> = (0..steps)
+        .map(|k| random_vectors(n, 1.0, 500 + k as u64))
+        .collect();
     let run = |sim: &mut Simulator, every: Option<usize>| {
         match every {
             Some(e) => sim.set_recording_checkpointed(e),
@@ -428,7 +705,17 @@ fn checkpointed_and_full_tapes_give_identical_gradients() {
         let end = (sim.positions().to_vec(), sim.time());
         let mut grads = Vec::new();
         for solver in [AdjointSolver::Direct, AdjointSolver::Krylov] {
-            grads.push(sim.backward(&w, &[], &BackwardOptions { solver, ..Default::default() }).unwrap());
+            grads.push(
+                sim.backward(
+                    &w,
+                    &[],
+                    &BackwardOptions {
+                        solver,
+                        ..Default::default()
+                    },
+                )
+                .unwrap(),
+            );
         }
         assert_eq!(sim.positions(), &end.0[..], "state restored after backward");
         assert_eq!(sim.time(), end.1);
@@ -442,7 +729,10 @@ fn checkpointed_and_full_tapes_give_identical_gradients() {
         assert_eq!(a.mu_obstacles, b.mu_obstacles);
         assert_eq!(a.k_stretch, b.k_stretch);
     }
-    assert!(ckpt_bytes * 3 < full_bytes, "checkpointed {ckpt_bytes} B vs full {full_bytes} B");
+    assert!(
+        ckpt_bytes * 3 < full_bytes,
+        "checkpointed {ckpt_bytes} B vs full {full_bytes} B"
+    );
 }
 
 /// The sock: a closed tube with a heel bend (curved rest shape), held at its four rim handles.
@@ -455,12 +745,24 @@ fn gradients_match_finite_differences_on_the_sock() {
     let base = Rollout {
         x0: sim.positions().to_vec(),
         v0: random_vectors(n, 0.3, 15),
-        targets: (0..steps).map(|k| t0.iter().map(|t| t + Vec3::new(0.0, 0.01, 0.02) * k as f64).collect()).collect(),
+        targets: (0..steps)
+            .map(|k| {
+                t0.iter()
+                    .map(|t| t + Vec3::new(0.0, 0.01, 0.02) * k as f64)
+                    .collect()
+            })
+            .collect(),
         forces: vec![Vec::new(); steps],
         params: sim.params().clone(),
         mu: None,
     };
-    check_all_gradients(&mut sim, &base, steps, &[AdjointSolver::Direct, AdjointSolver::Krylov], 1.0);
+    check_all_gradients(
+        &mut sim,
+        &base,
+        steps,
+        &[AdjointSolver::Direct, AdjointSolver::Krylov],
+        1.0,
+    );
 }
 
 /// Nodes in two contacts at once: the bottom square rests on a sticky plane while the top one
@@ -496,15 +798,36 @@ max_iterations = 300
     ));
     let steps = 3;
     let n = sim.num_nodes();
-    let v0: Vec<Vec3> = (0..n).map(|i| if i >= 4 { Vec3::new(0.5, -0.8, 0.2) } else { Vec3::zeros() }).collect();
+    let v0: Vec<Vec3> = (0..n)
+        .map(|i| {
+            if i >= 4 {
+                Vec3::new(0.5, -0.8, 0.2)
+            } else {
+                Vec3::zeros()
+            }
+        })
+        .collect();
     let base = contact_rollout(&sim, v0, steps, 1.0, 1e-5);
-    check_all_gradients(&mut sim, &base, steps, &[AdjointSolver::Direct, AdjointSolver::Krylov], 1.0);
+    check_all_gradients(
+        &mut sim,
+        &base,
+        steps,
+        &[AdjointSolver::Direct, AdjointSolver::Krylov],
+        1.0,
+    );
     // Some node really had two active contacts in one recorded step.
-    let loss = Loss { a: vec![vec![Vec3::zeros(); n]; steps], b: vec![vec![Vec3::zeros(); n]; steps] };
+    let loss = Loss {
+        a: vec![vec![Vec3::zeros(); n]; steps],
+        b: vec![vec![Vec3::zeros(); n]; steps],
+    };
     run(&mut sim, &base, &loss, true);
     let coupled = sim.tape().unwrap().records.iter().any(|r| {
         let mut count = vec![0; n];
-        for c in r.contacts.iter().filter(|c| c.branch != diffcloth::Branch::TakeOff) {
+        for c in r
+            .contacts
+            .iter()
+            .filter(|c| c.branch != diffcloth::Branch::TakeOff)
+        {
             match c.kind {
                 diffcloth::ContactKind::Obstacle { node, .. } => count[node] += 1,
                 diffcloth::ContactKind::SelfPair { a, b } => {
@@ -515,6 +838,9 @@ max_iterations = 300
         }
         count.iter().any(|&k| k >= 2)
     });
-    assert!(coupled, "no node had two active contacts: the test would not exercise the coupling");
+    assert!(
+        coupled,
+        "no node had two active contacts: the test would not exercise the coupling"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -1,7 +1,7 @@
 //! Integration tests of the simulator: each checks a physical fact, not only that it runs.
 mod common;
+mod contact;
 mod forward_physics;
 mod gradients;
-mod contact;
 mod pd_solver;
 mod scenes;

@@ -41,7 +41,9 @@ fn flatten(x: &[Vec3]) -> DVector<f64> {
 }
 
 fn unflatten(v: &DVector<f64>) -> Vec<Vec3> {
-    (0..v.len() / 3).map(|i| Vec3::new(v[3 * i], v[3 * i + 1], v[3 * i + 2])).collect()
+    (0..v.len() / 3)
+        .map(|i| Vec3::new(v[3 * i], v[3 * i + 1], v[3 * i + 2]))
+        .collect()
 }
 
 /// Newton's method on the same implicit-Euler objective, with a dense Hessian obtained by
@@ -99,16 +101,28 @@ fn residual_decreases_and_energy_never_increases() {
         sim.step(StepInput::default()).unwrap();
         let trace = sim.trace().unwrap().to_vec();
         // The loop ends early only if the update is exactly zero (a bitwise fixed point).
-        assert!(trace.len() == 200 || trace.last().unwrap().1 == 0.0, "{accel}: {} iterations", trace.len());
+        assert!(
+            trace.len() == 200 || trace.last().unwrap().1 == 0.0,
+            "{accel}: {} iterations",
+            trace.len()
+        );
         for w in trace.windows(2) {
-            assert!(w[1].0 <= w[0].0 + 1e-12 * w[0].0.abs(), "{accel}: energy rose {} -> {}", w[0].0, w[1].0);
+            assert!(
+                w[1].0 <= w[0].0 + 1e-12 * w[0].0.abs(),
+                "{accel}: energy rose {} -> {}",
+                w[0].0,
+                w[1].0
+            );
         }
         let (first, last) = (trace[0].1, trace.last().unwrap().1);
         assert!(last < 1e-8 * first, "{accel}: residual {first} -> {last}");
         if accel == "none" {
             // Plain PD: the residual also decreases over every 10-iteration window.
             for k in (10..trace.len()).step_by(10) {
-                assert!(trace[k].1 < trace[k - 10].1 || trace[k].1 < 1e-13, "{accel}: iteration {k}");
+                assert!(
+                    trace[k].1 < trace[k - 10].1 || trace[k].1 < 1e-13,
+                    "{accel}: iteration {k}"
+                );
             }
         }
     }
@@ -128,7 +142,10 @@ fn anderson_converges_to_the_same_solution_in_fewer_iterations() {
     }
     let err = max_distance(plain.positions(), fast.positions());
     assert!(err < 1e-6, "trajectories differ by {err}");
-    assert!(3 * it_fast < it_plain, "anderson {it_fast} vs plain {it_plain} iterations");
+    assert!(
+        3 * it_fast < it_plain,
+        "anderson {it_fast} vs plain {it_plain} iterations"
+    );
 }
 
 /// The parallel local step gives bit-identical results to the serial one.
@@ -152,19 +169,39 @@ fn parallel_and_serial_local_steps_are_bitwise_identical() {
         }
         sim.positions().to_vec()
     };
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
     let parallel = pool.install(|| run(true));
     let serial = run(false);
-    assert!(parallel.iter().zip(&serial).all(|(a, b)| a.iter().zip(b.iter()).all(|(p, q)| p.to_bits() == q.to_bits())));
+    assert!(parallel.iter().zip(&serial).all(|(a, b)| a
+        .iter()
+        .zip(b.iter())
+        .all(|(p, q)| p.to_bits() == q.to_bits())));
 }
 
 #[test]
 fn solver_settings_are_validated() {
     let mut sim = small_scene("anderson", 10, 1e-8);
     let ok = sim.solver().clone();
-    assert!(sim.set_solver(SolverSettings { max_iterations: 0, ..ok.clone() }).is_err());
-    assert!(sim.set_solver(SolverSettings { tolerance: f64::NAN, ..ok.clone() }).is_err());
-    assert!(sim.set_solver(SolverSettings { history: 99, ..ok.clone() }).is_err());
+    assert!(sim
+        .set_solver(SolverSettings {
+            max_iterations: 0,
+            ..ok.clone()
+        })
+        .is_err());
+    assert!(sim
+        .set_solver(SolverSettings {
+            tolerance: f64::NAN,
+            ..ok.clone()
+        })
+        .is_err());
+    assert!(sim
+        .set_solver(SolverSettings {
+            history: 99,
+            ..ok.clone()
+        })
+        .is_err());
     assert_eq!(sim.solver(), &ok);
 }
-

@@ -8,7 +8,9 @@ use crate::Vec3;
 pub enum Motion {
     Static,
     /// Constant velocity (m/s) from its configured placement at t = 0.
-    Linear { velocity: Vec3 },
+    Linear {
+        velocity: Vec3,
+    },
     /// Piecewise-linear offsets `(t, offset)` with increasing t; held constant outside.
     Path(Vec<(f64, Vec3)>),
 }

@@ -40,12 +40,21 @@ impl SelfCollision {
             excluded.extend(list);
             excluded_offsets.push(excluded.len());
         }
-        Self { radius, mu, excluded_offsets, excluded, sorted: Vec::with_capacity(n), cells: vec![[0; 3]; n] }
+        Self {
+            radius,
+            mu,
+            excluded_offsets,
+            excluded,
+            sorted: Vec::with_capacity(n),
+            cells: vec![[0; 3]; n],
+        }
     }
 
     /// Whether `a` and `b` share a triangle.
     pub fn adjacent(&self, a: usize, b: usize) -> bool {
-        self.excluded[self.excluded_offsets[a]..self.excluded_offsets[a + 1]].binary_search(&b).is_ok()
+        self.excluded[self.excluded_offsets[a]..self.excluded_offsets[a + 1]]
+            .binary_search(&b)
+            .is_ok()
     }
 
     /// Appends every non-adjacent pair `(i, j, distance)`, `i < j`, closer than `reach`.
@@ -53,7 +62,11 @@ impl SelfCollision {
         let inv = 1.0 / reach;
         self.sorted.clear();
         for (i, p) in x.iter().enumerate() {
-            let cell = [(p.x * inv).floor() as i64, (p.y * inv).floor() as i64, (p.z * inv).floor() as i64];
+            let cell = [
+                (p.x * inv).floor() as i64,
+                (p.y * inv).floor() as i64,
+                (p.z * inv).floor() as i64,
+            ];
             self.cells[i] = cell;
             self.sorted.push((cell_key(cell), i));
         }
@@ -88,7 +101,8 @@ impl SelfCollision {
 }
 
 fn cell_key(c: [i64; 3]) -> u64 {
-    (c[0].wrapping_mul(73_856_093) ^ c[1].wrapping_mul(19_349_663) ^ c[2].wrapping_mul(83_492_791)) as u64
+    (c[0].wrapping_mul(73_856_093) ^ c[1].wrapping_mul(19_349_663) ^ c[2].wrapping_mul(83_492_791))
+        as u64
 }
 
 #[cfg(test)]
@@ -103,7 +117,13 @@ mod tests {
         let x: Vec<Vec3> = mesh
             .positions
             .iter()
-            .map(|p| if p.x > 0.0 { Vec3::new(-p.x, 0.03 + 0.001 * p.z, p.z) } else { *p })
+            .map(|p| {
+                if p.x > 0.0 {
+                    Vec3::new(-p.x, 0.03 + 0.001 * p.z, p.z)
+                } else {
+                    *p
+                }
+            })
             .collect();
         let mut sc = SelfCollision::new(&mesh, 0.05, 0.1);
         let mut pairs = Vec::new();

@@ -8,15 +8,41 @@ use nalgebra::{Matrix3, Rotation3};
 #[derive(Debug, Clone)]
 pub enum Shape {
     /// Half-space below the plane through `point` with unit `normal` (free side: the normal's).
-    Plane { point: Vec3, normal: Vec3 },
-    Sphere { center: Vec3, radius: f64 },
+    Plane {
+        point: Vec3,
+        normal: Vec3,
+    },
+    Sphere {
+        center: Vec3,
+        radius: f64,
+    },
     /// All points within `radius` of the segment `a`-`b`.
-    Capsule { a: Vec3, b: Vec3, radius: f64 },
+    Capsule {
+        a: Vec3,
+        b: Vec3,
+        radius: f64,
+    },
     /// An oriented box: `half_extents` along the axes of `rotation`.
-    Box { center: Vec3, half_extents: Vec3, rotation: Rotation3<f64> },
+    Box {
+        center: Vec3,
+        half_extents: Vec3,
+        rotation: Rotation3<f64>,
+    },
     /// A bowl: solid below the rim plane `y = rim_height` except a spherical cavity; the free
     /// space is the cavity (radius `radius` around `center`) plus everything above the rim.
-    Bowl { center: Vec3, radius: f64, rim_height: f64 },
+    Bowl {
+        center: Vec3,
+        radius: f64,
+        rim_height: f64,
+    },
+    /// An upside-down square pyramid cut into a solid (the crumpling scene of Liang et al. 2019,
+    /// Fig. 3.2): solid below the rim plane `y = apex.y + height` except a pit whose four
+    /// planar walls meet at `apex` and open to a square of `half_width` (axis-aligned) at the rim.
+    PyramidPit {
+        apex: Vec3,
+        half_width: f64,
+        height: f64,
+    },
     /// Several solids together (a head on a neck, a foot and a leg).
     Union(Vec<Shape>),
 }
@@ -32,11 +58,16 @@ impl Shape {
             }
             Shape::Capsule { a, b, radius } => {
                 let ab = b - a;
-                let t = ((p - a).dot(&ab) / ab.norm_squared().max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
+                let t =
+                    ((p - a).dot(&ab) / ab.norm_squared().max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
                 let (len, dir) = length_and_direction(p - (a + t * ab));
                 (len - radius, dir)
             }
-            Shape::Box { center, half_extents, rotation } => {
+            Shape::Box {
+                center,
+                half_extents,
+                rotation,
+            } => {
                 let local = rotation.inverse() * (p - center);
                 let q = local.abs() - half_extents;
                 let outside = q.sup(&Vec3::zeros());
@@ -50,12 +81,42 @@ impl Shape {
                     (q[k], rotation * dir)
                 }
             }
-            Shape::Bowl { center, radius, rim_height } => {
+            Shape::Bowl {
+                center,
+                radius,
+                rim_height,
+            } => {
                 let (len, dir) = length_and_direction(p - center);
                 let in_cavity = radius - len;
                 let above_rim = p.y - rim_height;
                 if in_cavity >= above_rim {
                     (in_cavity, -dir)
+                } else {
+                    (above_rim, Vec3::y())
+                }
+            }
+            Shape::PyramidPit {
+                apex,
+                half_width,
+                height,
+            } => {
+                // Inside a convex pit the distance to its boundary is the smallest distance to
+                // a wall plane (exact), so the walls need no edge or corner cases.
+                let slope = half_width / height;
+                let scale = 1.0 / (1.0 + slope * slope).sqrt();
+                let d = p - apex;
+                let mut best = (f64::INFINITY, Vec3::y());
+                for (axis, sign) in [(0, 1.0), (0, -1.0), (2, 1.0), (2, -1.0)] {
+                    let dist = (slope * d.y - sign * d[axis]) * scale;
+                    if dist < best.0 {
+                        let mut normal = Vec3::new(0.0, slope * scale, 0.0);
+                        normal[axis] = -sign * scale;
+                        best = (dist, normal);
+                    }
+                }
+                let above_rim = d.y - height;
+                if best.0 >= above_rim {
+                    best
                 } else {
                     (above_rim, Vec3::y())
                 }
@@ -81,7 +142,7 @@ impl Shape {
             }
         };
         match self {
-            Shape::Plane { .. } => Matrix3::zeros(),
+            Shape::Plane { .. } | Shape::PyramidPit { .. } => Matrix3::zeros(),
             Shape::Sphere { center, .. } => curved(p - center),
             Shape::Capsule { a, b, .. } => {
                 let ab = b - a;
@@ -101,7 +162,11 @@ impl Shape {
                     }
                 }
             }
-            Shape::Box { center, half_extents, rotation } => {
+            Shape::Box {
+                center,
+                half_extents,
+                rotation,
+            } => {
                 let local = rotation.inverse() * (p - center);
                 let q = local.abs() - half_extents;
                 let outside = q.sup(&Vec3::zeros());
@@ -120,7 +185,11 @@ impl Shape {
                 let r = rotation.matrix();
                 r * ((active - n * n.transpose()) / len) * r.transpose()
             }
-            Shape::Bowl { center, radius, rim_height } => {
+            Shape::Bowl {
+                center,
+                radius,
+                rim_height,
+            } => {
                 let (len, _) = length_and_direction(p - center);
                 if radius - len >= p.y - rim_height {
                     -curved(p - center)
@@ -146,17 +215,37 @@ impl Shape {
             }
             Shape::Sphere { center, radius } | Shape::Bowl { center, radius, .. } => {
                 if !finite(center) || !(*radius > 0.0 && radius.is_finite()) {
-                    return Err(format!("radius must be positive and the center finite, got {radius}"));
+                    return Err(format!(
+                        "radius must be positive and the center finite, got {radius}"
+                    ));
                 }
             }
             Shape::Capsule { a, b, radius } => {
                 if !finite(a) || !finite(b) || !(*radius > 0.0 && radius.is_finite()) {
-                    return Err(format!("capsule needs finite end points and a positive radius, got {radius}"));
+                    return Err(format!(
+                        "capsule needs finite end points and a positive radius, got {radius}"
+                    ));
                 }
             }
-            Shape::Box { center, half_extents, .. } => {
+            Shape::Box {
+                center,
+                half_extents,
+                ..
+            } => {
                 if !finite(center) || !half_extents.iter().all(|&h| h > 0.0 && h.is_finite()) {
                     return Err("box half_extents must be positive".into());
+                }
+            }
+            Shape::PyramidPit {
+                apex,
+                half_width,
+                height,
+            } => {
+                if !finite(apex)
+                    || !(*half_width > 0.0 && half_width.is_finite())
+                    || !(*height > 0.0 && height.is_finite())
+                {
+                    return Err(format!("pyramid_pit needs a finite apex and positive half_width and height, got {half_width}, {height}"));
                 }
             }
             Shape::Union(parts) => {
@@ -194,7 +283,11 @@ mod tests {
             let mut e = Vec3::zeros();
             e[k] = eps;
             let fd = (s.distance(&(p + e)).0 - s.distance(&(p - e)).0) / (2.0 * eps);
-            assert!((fd - n[k]).abs() < 1e-6, "{s:?} at {p:?}: d/dx{k} {fd} vs normal {}", n[k]);
+            assert!(
+                (fd - n[k]).abs() < 1e-6,
+                "{s:?} at {p:?}: d/dx{k} {fd} vs normal {}",
+                n[k]
+            );
         }
         assert!((n.norm() - 1.0).abs() < 1e-12);
         let jac = s.normal_jacobian(&p);
@@ -202,17 +295,31 @@ mod tests {
             let mut e = Vec3::zeros();
             e[k] = eps;
             let fd = (s.distance(&(p + e)).1 - s.distance(&(p - e)).1) / (2.0 * eps);
-            assert!((fd - jac.column(k)).norm() < 1e-5, "{s:?} at {p:?}: dn/dx{k} {fd:?} vs {:?}", jac.column(k));
+            assert!(
+                (fd - jac.column(k)).norm() < 1e-5,
+                "{s:?} at {p:?}: dn/dx{k} {fd:?} vs {:?}",
+                jac.column(k)
+            );
         }
     }
 
     #[test]
     fn distances_and_normals() {
-        let plane = Shape::Plane { point: Vec3::new(0.0, 1.0, 0.0), normal: Vec3::y() };
+        let plane = Shape::Plane {
+            point: Vec3::new(0.0, 1.0, 0.0),
+            normal: Vec3::y(),
+        };
         assert_eq!(plane.distance(&Vec3::new(5.0, 3.0, 2.0)).0, 2.0);
-        let sphere = Shape::Sphere { center: Vec3::zeros(), radius: 2.0 };
+        let sphere = Shape::Sphere {
+            center: Vec3::zeros(),
+            radius: 2.0,
+        };
         assert!((sphere.distance(&Vec3::new(0.0, 0.0, 3.0)).0 - 1.0).abs() < 1e-15);
-        let capsule = Shape::Capsule { a: Vec3::zeros(), b: Vec3::new(0.0, 4.0, 0.0), radius: 0.5 };
+        let capsule = Shape::Capsule {
+            a: Vec3::zeros(),
+            b: Vec3::new(0.0, 4.0, 0.0),
+            radius: 0.5,
+        };
         assert!((capsule.distance(&Vec3::new(1.0, 2.0, 0.0)).0 - 0.5).abs() < 1e-15);
         assert!((capsule.distance(&Vec3::new(0.0, 5.0, 0.0)).0 - 0.5).abs() < 1e-15);
         let boxed = Shape::Box {
@@ -222,14 +329,51 @@ mod tests {
         };
         assert!((boxed.distance(&Vec3::new(0.0, 2.5, 0.0)).0 - 0.5).abs() < 1e-12);
         assert!((boxed.distance(&Vec3::zeros()).0 + 1.0).abs() < 1e-12);
-        let bowl = Shape::Bowl { center: Vec3::zeros(), radius: 2.0, rim_height: 0.5 };
-        assert!((bowl.distance(&Vec3::new(0.0, -1.5, 0.0)).0 - 0.5).abs() < 1e-15, "inside the cavity");
-        assert!(bowl.distance(&Vec3::new(0.0, -2.5, 0.0)).0 < 0.0, "in the bowl's wall");
-        assert!(bowl.distance(&Vec3::new(5.0, 1.0, 0.0)).0 > 0.0, "above the rim");
+        let bowl = Shape::Bowl {
+            center: Vec3::zeros(),
+            radius: 2.0,
+            rim_height: 0.5,
+        };
+        assert!(
+            (bowl.distance(&Vec3::new(0.0, -1.5, 0.0)).0 - 0.5).abs() < 1e-15,
+            "inside the cavity"
+        );
+        assert!(
+            bowl.distance(&Vec3::new(0.0, -2.5, 0.0)).0 < 0.0,
+            "in the bowl's wall"
+        );
+        assert!(
+            bowl.distance(&Vec3::new(5.0, 1.0, 0.0)).0 > 0.0,
+            "above the rim"
+        );
+        let pit = Shape::PyramidPit {
+            apex: Vec3::new(0.0, -2.0, 0.0),
+            half_width: 2.0,
+            height: 2.0,
+        };
+        let on_axis = pit.distance(&Vec3::new(0.0, -1.0, 0.0)).0;
+        assert!(
+            (on_axis - 2f64.sqrt() / 2.0).abs() < 1e-15,
+            "1 m above the apex of 45-degree walls: {on_axis}"
+        );
+        assert!(
+            pit.distance(&Vec3::new(1.5, -1.0, 0.0)).0 < 0.0,
+            "in the pit's wall"
+        );
+        assert!(
+            pit.distance(&Vec3::new(5.0, 0.5, 0.0)).0 > 0.0,
+            "above the rim"
+        );
         let union = Shape::Union(vec![sphere.clone(), capsule.clone()]);
         assert!((union.distance(&Vec3::new(0.0, 0.0, 3.0)).0 - 1.0).abs() < 1e-15);
-        for p in [Vec3::new(0.3, 2.7, -0.4), Vec3::new(1.5, -0.2, 0.9), Vec3::new(-0.7, 0.1, 3.3), Vec3::new(1.4, 2.6, 0.1), Vec3::new(1.3, 2.4, 3.5)] {
-            for s in [&plane, &sphere, &capsule, &boxed, &bowl, &union] {
+        for p in [
+            Vec3::new(0.3, 2.7, -0.4),
+            Vec3::new(1.5, -0.2, 0.9),
+            Vec3::new(-0.7, 0.1, 3.3),
+            Vec3::new(1.4, 2.6, 0.1),
+            Vec3::new(1.3, 2.4, 3.5),
+        ] {
+            for s in [&plane, &sphere, &capsule, &boxed, &bowl, &pit, &union] {
                 check_gradient(s, p);
             }
         }

@@ -14,7 +14,11 @@ pub struct Attachments {
 impl Attachments {
     pub fn new(nodes: Vec<usize>, stiffness: f64, targets: Vec<Vec3>) -> Self {
         assert_eq!(nodes.len(), targets.len());
-        Self { nodes, stiffness, targets }
+        Self {
+            nodes,
+            stiffness,
+            targets,
+        }
     }
 
     pub fn nodes(&self) -> &[usize] {
@@ -40,7 +44,12 @@ impl PdConstraints for Attachments {
     }
 
     fn project(&mut self, x: &[Vec3], _parallel: bool) -> f64 {
-        let e: f64 = self.nodes.iter().zip(&self.targets).map(|(&j, t)| (x[j] - t).norm_squared()).sum();
+        let e: f64 = self
+            .nodes
+            .iter()
+            .zip(&self.targets)
+            .map(|(&j, t)| (x[j] - t).norm_squared())
+            .sum();
         0.5 * self.stiffness * e
     }
 
@@ -59,7 +68,11 @@ mod tests {
     #[test]
     fn energy_gradient_matches_finite_differences() {
         let x = jitter(&vec![Vec3::zeros(); 4], 1.0, 1);
-        let mut a = Attachments::new(vec![1, 3], 50.0, vec![Vec3::new(1.0, 2.0, 3.0), Vec3::zeros()]);
+        let mut a = Attachments::new(
+            vec![1, 3],
+            50.0,
+            vec![Vec3::new(1.0, 2.0, 3.0), Vec3::zeros()],
+        );
         check_gradient_fd(&mut a, &x, 1e-7);
         // The projection is the target: zero energy there.
         let mut at = x.clone();

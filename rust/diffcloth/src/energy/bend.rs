@@ -77,9 +77,14 @@ impl Bend {
             b.center.push(i);
             b.area.push(area);
             // A flat rest shape gives a Laplacian that is zero up to round-off: make it exact.
-            let length = if lap.norm() * mean_edge < 1e-9 { 0.0 } else { lap.norm() };
+            let length = if lap.norm() * mean_edge < 1e-9 {
+                0.0
+            } else {
+                lap.norm()
+            };
             b.rest_length.push(length);
-            b.rest_vector.push(if length > 0.0 { lap } else { Vec3::zeros() });
+            b.rest_vector
+                .push(if length > 0.0 { lap } else { Vec3::zeros() });
         }
         b.weight = vec![0.0; b.center.len()];
         b.projection = vec![Vec3::zeros(); b.center.len()];
@@ -167,8 +172,12 @@ impl PdConstraints for Bend {
         for i in 0..self.len() {
             let range = self.offsets[i]..self.offsets[i + 1];
             let center_coef: f64 = -self.coef[range.clone()].iter().sum::<f64>();
-            let nodes = std::iter::once((self.center[i], center_coef))
-                .chain(self.neighbor[range.clone()].iter().copied().zip(self.coef[range].iter().copied()));
+            let nodes = std::iter::once((self.center[i], center_coef)).chain(
+                self.neighbor[range.clone()]
+                    .iter()
+                    .copied()
+                    .zip(self.coef[range].iter().copied()),
+            );
             let nodes: Vec<(usize, f64)> = nodes.collect();
             for &(a, ca) in &nodes {
                 for &(b, cb) in &nodes {
@@ -180,15 +189,26 @@ impl PdConstraints for Bend {
 
     fn project(&mut self, x: &[Vec3], parallel: bool) -> f64 {
         // Move the output buffers out so `work` can borrow the geometry (no allocation).
-        let (mut projection, mut energy) = (std::mem::take(&mut self.projection), std::mem::take(&mut self.energy));
+        let (mut projection, mut energy) = (
+            std::mem::take(&mut self.projection),
+            std::mem::take(&mut self.energy),
+        );
         let this = &*self;
         let work = |(i, (p, e)): (usize, (&mut Vec3, &mut f64))| {
             (*p, *e) = this.project_one(i, x);
         };
         if parallel && projection.len() >= PARALLEL_MIN_CONSTRAINTS {
-            projection.par_iter_mut().zip(energy.par_iter_mut()).enumerate().for_each(work);
+            projection
+                .par_iter_mut()
+                .zip(energy.par_iter_mut())
+                .enumerate()
+                .for_each(work);
         } else {
-            projection.iter_mut().zip(energy.iter_mut()).enumerate().for_each(work);
+            projection
+                .iter_mut()
+                .zip(energy.iter_mut())
+                .enumerate()
+                .for_each(work);
         }
         (self.projection, self.energy) = (projection, energy);
         self.energy.iter().sum()
@@ -230,7 +250,9 @@ fn mixed_voronoi_areas(mesh: &TriMesh) -> Vec<f64> {
                     // (|e_ki|^2 cot(angle at j) + |e_kj|^2 cot(angle at i)) / 8
                     let (i, j) = ((k + 1) % 3, (k + 2) % 3);
                     let (pi, pj, pk) = (x[tri[i]], x[tri[j]], x[tri[k]]);
-                    ((pi - pk).norm_squared() * corners[j].0 + (pj - pk).norm_squared() * corners[i].0) / 8.0
+                    ((pi - pk).norm_squared() * corners[j].0
+                        + (pj - pk).norm_squared() * corners[i].0)
+                        / 8.0
                 }
             };
         }
@@ -242,7 +264,11 @@ fn mean_edge_length(mesh: &TriMesh) -> f64 {
     let total: f64 = mesh
         .triangles
         .iter()
-        .map(|t| (0..3).map(|k| (mesh.positions[t[k]] - mesh.positions[t[(k + 1) % 3]]).norm()).sum::<f64>())
+        .map(|t| {
+            (0..3)
+                .map(|k| (mesh.positions[t[k]] - mesh.positions[t[(k + 1) % 3]]).norm())
+                .sum::<f64>()
+        })
         .sum();
     total / (3 * mesh.triangles.len()) as f64
 }
@@ -278,7 +304,11 @@ mod tests {
         assert!(b.rest_length.iter().all(|&l| l > 0.1));
         let (e, g) = gradient(&mut b, &m.positions);
         assert!(e < 1e-24);
-        assert!(g.iter().all(|v| v.norm() < 1e-10), "{:?}", g.iter().map(|v| v.norm()).fold(0.0, f64::max));
+        assert!(
+            g.iter().all(|v| v.norm() < 1e-10),
+            "{:?}",
+            g.iter().map(|v| v.norm()).fold(0.0, f64::max)
+        );
         // The curvature of a cylinder of radius R is 1/R along the inward normal.
         for i in 0..b.len() {
             let k = b.curvature(i, &m.positions).norm();
@@ -296,7 +326,9 @@ mod tests {
             // Perturb the curvature vector through one neighbour (A_i is linear).
             // (via the neighbour with the largest coefficient: right angles give zero weights).
             let (nbrs, coefs) = b.stencil(i);
-            let k = (0..nbrs.len()).max_by(|&a, &b| coefs[a].abs().total_cmp(&coefs[b].abs())).unwrap();
+            let k = (0..nbrs.len())
+                .max_by(|&a, &b| coefs[a].abs().total_cmp(&coefs[b].abs()))
+                .unwrap();
             let (j, c) = (nbrs[k], coefs[k]);
             for d in 0..3 {
                 let eps = 1e-6;

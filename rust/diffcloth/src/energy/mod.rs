@@ -11,7 +11,9 @@ mod stretch;
 
 pub use attachment::Attachments;
 pub use bend::Bend;
-pub use stretch::{project_singular_values, projection_jacobian as stretch_projection_jacobian, Stretch};
+pub use stretch::{
+    project_singular_values, projection_jacobian as stretch_projection_jacobian, Stretch,
+};
 
 use crate::Vec3;
 
@@ -85,11 +87,17 @@ pub(crate) mod testing {
 
     /// A deterministic pseudo-random perturbation in [-amp, amp].
     pub fn jitter(x: &[Vec3], amp: f64, seed: u64) -> Vec<Vec3> {
-        let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        let mut s = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         let mut next = || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
         };
-        x.iter().map(|p| p + Vec3::new(next(), next(), next()) * amp).collect()
+        x.iter()
+            .map(|p| p + Vec3::new(next(), next(), next()) * amp)
+            .collect()
     }
 }

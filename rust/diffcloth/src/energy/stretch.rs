@@ -36,9 +36,15 @@ impl Stretch {
             let w = normal.cross(&u);
             // Rest edges in the triangle's own orthonormal frame (u, w).
             let dm = Matrix2::new(e1.norm(), e2.dot(&u), 0.0, e2.dot(&w));
-            let dm_inv = dm.try_inverse().expect("TriMesh::new rejects degenerate triangles");
+            let dm_inv = dm
+                .try_inverse()
+                .expect("TriMesh::new rejects degenerate triangles");
             let b = |r: Vector2<f64>| (r.transpose() * dm_inv).transpose();
-            shape.push([b(Vector2::new(-1.0, -1.0)), b(Vector2::new(1.0, 0.0)), b(Vector2::new(0.0, 1.0))]);
+            shape.push([
+                b(Vector2::new(-1.0, -1.0)),
+                b(Vector2::new(1.0, 0.0)),
+                b(Vector2::new(0.0, 1.0)),
+            ]);
             rest_area.push(0.5 * dm[(0, 0)] * dm[(1, 1)].abs());
         }
         let n = mesh.triangles.len();
@@ -106,7 +112,10 @@ impl PdConstraints for Stretch {
     fn project(&mut self, x: &[Vec3], parallel: bool) -> f64 {
         let (lo, hi) = (self.strain_min, self.strain_max);
         // Move the output buffers out so `work` can borrow the geometry (no allocation).
-        let (mut projection, mut energy) = (std::mem::take(&mut self.projection), std::mem::take(&mut self.energy));
+        let (mut projection, mut energy) = (
+            std::mem::take(&mut self.projection),
+            std::mem::take(&mut self.energy),
+        );
         let this = &*self;
         // Triangles go in groups of LANES: their independent sqrt/div chains overlap and
         // vectorize, instead of one latency-bound chain after another.
@@ -123,9 +132,17 @@ impl PdConstraints for Stretch {
             }
         };
         if parallel && projection.len() >= PARALLEL_MIN_CONSTRAINTS {
-            projection.par_chunks_mut(LANES).zip(energy.par_chunks_mut(LANES)).enumerate().for_each(work);
+            projection
+                .par_chunks_mut(LANES)
+                .zip(energy.par_chunks_mut(LANES))
+                .enumerate()
+                .for_each(work);
         } else {
-            projection.chunks_mut(LANES).zip(energy.chunks_mut(LANES)).enumerate().for_each(work);
+            projection
+                .chunks_mut(LANES)
+                .zip(energy.chunks_mut(LANES))
+                .enumerate()
+                .for_each(work);
         }
         (self.projection, self.energy) = (projection, energy);
         // Serial sum: bitwise identical whatever the thread count.
@@ -153,10 +170,18 @@ fn singular_2d(f: &Mat32) -> (f64, f64, Vector2<f64>, Vector2<f64>) {
     let (l1, l2) = (half_trace + disc, (half_trace - disc).max(0.0));
     // Eigenvector of l1: (l1 - c, b) or (b, l1 - a); take the better conditioned one.
     let (p, q) = (Vector2::new(l1 - c, b), Vector2::new(b, l1 - a));
-    let v = if p.norm_squared() >= q.norm_squared() { p } else { q };
+    let v = if p.norm_squared() >= q.norm_squared() {
+        p
+    } else {
+        q
+    };
     let norm = v.norm();
     // An isotropic F^T F (norm = 0) has every direction as eigenvector.
-    let v1 = if norm > 1e-300 { v / norm } else { Vector2::new(1.0, 0.0) };
+    let v1 = if norm > 1e-300 {
+        v / norm
+    } else {
+        Vector2::new(1.0, 0.0)
+    };
     (l1.sqrt(), l2.sqrt(), v1, Vector2::new(-v1.y, v1.x))
 }
 
@@ -168,7 +193,8 @@ const LANES: usize = 4;
 fn project_singular_values_lanes(f: &[Mat32; LANES], lo: f64, hi: f64) -> [Mat32; LANES] {
     let mut out = [Mat32::zeros(); LANES];
     let mut regular = [false; LANES];
-    let (mut r1, mut r2, mut v1x, mut v1y) = ([0.0; LANES], [0.0; LANES], [0.0; LANES], [0.0; LANES]);
+    let (mut r1, mut r2, mut v1x, mut v1y) =
+        ([0.0; LANES], [0.0; LANES], [0.0; LANES], [0.0; LANES]);
     for l in 0..LANES {
         let (c0, c1) = (f[l].column(0), f[l].column(1));
         let (a, b, c) = (c0.dot(&c0), c0.dot(&c1), c1.dot(&c1));
@@ -179,7 +205,11 @@ fn project_singular_values_lanes(f: &[Mat32; LANES], lo: f64, hi: f64) -> [Mat32
         let take_p = px * px + py * py >= qx * qx + qy * qy;
         let (vx, vy) = if take_p { (px, py) } else { (qx, qy) };
         let norm2 = vx * vx + vy * vy;
-        let inv = if norm2 > 1e-300 { 1.0 / norm2.sqrt() } else { 0.0 };
+        let inv = if norm2 > 1e-300 {
+            1.0 / norm2.sqrt()
+        } else {
+            0.0
+        };
         let isotropic = norm2 <= 1e-300;
         v1x[l] = if isotropic { 1.0 } else { vx * inv };
         v1y[l] = if isotropic { 0.0 } else { vy * inv };
@@ -237,12 +267,20 @@ pub fn projection_jacobian(f: &Mat32, lo: f64, hi: f64) -> [[f64; 6]; 6] {
     let u1 = f * v1 / s1c;
     let mut u2 = f * v2;
     u2 -= u1 * u1.dot(&u2);
-    let u2 = if u2.norm() > tiny { u2.normalize() } else { complete(&u1) };
+    let u2 = if u2.norm() > tiny {
+        u2.normalize()
+    } else {
+        complete(&u1)
+    };
     let u3 = u1.cross(&u2);
     let (f1, f2) = (s1.clamp(lo, hi), s2.clamp(lo, hi));
     let slope = |s: f64| if s > lo && s < hi { 1.0 } else { 0.0 };
     let (d1, d2) = (slope(s1), slope(s2));
-    let diff = if (s1 - s2).abs() > 1e-10 * s1.max(1e-300) { (f1 - f2) / (s1 - s2) } else { 0.5 * (d1 + d2) };
+    let diff = if (s1 - s2).abs() > 1e-10 * s1.max(1e-300) {
+        (f1 - f2) / (s1 - s2)
+    } else {
+        0.5 * (d1 + d2)
+    };
     let sum = (f1 + f2) / (s1c + s2c);
     let u = nalgebra::Matrix3::from_columns(&[u1, u2, u3]);
     let v = Matrix2::from_columns(&[v1, v2]);
@@ -309,9 +347,16 @@ mod tests {
             for k in 0..6 {
                 let mut df = Mat32::zeros();
                 df[(k % 3, k / 3)] = eps;
-                let fd = (project_singular_values(&(f + df), *lo, *hi) - project_singular_values(&(f - df), *lo, *hi)) / (2.0 * eps);
+                let fd = (project_singular_values(&(f + df), *lo, *hi)
+                    - project_singular_values(&(f - df), *lo, *hi))
+                    / (2.0 * eps);
                 for r in 0..6 {
-                    assert!((fd[(r % 3, r / 3)] - jac[r][k]).abs() < 1e-6, "seed {seed} [{r}][{k}]: {} vs {}", jac[r][k], fd[(r % 3, r / 3)]);
+                    assert!(
+                        (fd[(r % 3, r / 3)] - jac[r][k]).abs() < 1e-6,
+                        "seed {seed} [{r}][{k}]: {} vs {}",
+                        jac[r][k],
+                        fd[(r % 3, r / 3)]
+                    );
                 }
             }
             for r in 0..6 {
@@ -335,7 +380,10 @@ mod tests {
             let svd = f.svd(true, true);
             let clamped = svd.singular_values.map(|s| s.clamp(0.9, 1.1));
             let expected = svd.u.unwrap() * Matrix2::from_diagonal(&clamped) * svd.v_t.unwrap();
-            assert!((p - expected).norm() < 1e-10 * (1.0 + f.norm()), "seed {seed}");
+            assert!(
+                (p - expected).norm() < 1e-10 * (1.0 + f.norm()),
+                "seed {seed}"
+            );
             // Its singular values are inside the limits ...
             let sv = p.svd(false, false).singular_values;
             assert!(sv.iter().all(|&s| (0.9 - 1e-12..=1.1 + 1e-12).contains(&s)));
@@ -364,7 +412,10 @@ mod tests {
             let lanes = project_singular_values_lanes(&f, 0.9, 1.1);
             for l in 0..LANES {
                 let scalar = project_singular_values(&f[l], 0.9, 1.1);
-                assert!((lanes[l] - scalar).norm() < 1e-12 * (1.0 + scalar.norm()), "seed {seed} lane {l}");
+                assert!(
+                    (lanes[l] - scalar).norm() < 1e-12 * (1.0 + scalar.norm()),
+                    "seed {seed} lane {l}"
+                );
             }
         }
     }

@@ -46,7 +46,13 @@ pub struct HatParams {
 
 impl Default for HatParams {
     fn default() -> Self {
-        Self { crown_radius: 2.2, crown_height: 2.2, brim_radius: 3.0, brim_droop: 0.3, edge_length: 0.295 }
+        Self {
+            crown_radius: 2.2,
+            crown_height: 2.2,
+            brim_radius: 3.0,
+            brim_droop: 0.3,
+            edge_length: 0.295,
+        }
     }
 }
 
@@ -109,7 +115,11 @@ fn axpy(a: f64, x: [f64; 3], y: [f64; 3]) -> [f64; 3] {
 /// the direction of increasing angle and `d` points from one ring to the next.
 /// Returns the garment (without handles) and the last ring.
 fn build(sections: &[Section], h: f64) -> (Garment, Ring) {
-    let mut g = Garment { positions: Vec::new(), triangles: Vec::new(), handles: Vec::new() };
+    let mut g = Garment {
+        positions: Vec::new(),
+        triangles: Vec::new(),
+        handles: Vec::new(),
+    };
     let last = sections.len() - 1;
     let mut prev: Option<Ring> = None;
     for (k, s) in sections.iter().enumerate() {
@@ -118,11 +128,23 @@ fn build(sections: &[Section], h: f64) -> (Garment, Ring) {
             _ if k == last => 4 * ((TAU * s.rho / (4.0 * h)).round() as usize).max(2),
             _ => ((TAU * s.rho / h).round() as usize).max(6),
         };
-        let phase = if k == 0 { 0.0 } else { 0.5 * ((last - k) % 2) as f64 };
-        let ring = Ring { start: g.positions.len(), count, phase };
+        let phase = if k == 0 {
+            0.0
+        } else {
+            0.5 * ((last - k) % 2) as f64
+        };
+        let ring = Ring {
+            start: g.positions.len(),
+            count,
+            phase,
+        };
         for j in 0..count {
             let a = TAU * (j as f64 + phase) / count as f64;
-            g.positions.push(axpy(s.rho * a.cos(), s.e1, axpy(s.rho * a.sin(), s.e2, s.center)));
+            g.positions.push(axpy(
+                s.rho * a.cos(),
+                s.e1,
+                axpy(s.rho * a.sin(), s.e2, s.center),
+            ));
         }
         if let Some(p) = prev {
             stitch(&mut g.triangles, &p, &ring);
@@ -191,7 +213,10 @@ fn resample(f: impl Fn(f64) -> [f64; 2], step: f64) -> Vec<[f64; 2]> {
 ///
 /// Panics unless `brim_radius > crown_radius` and `edge_length > 0`.
 pub fn hat(p: &HatParams) -> Garment {
-    assert!(p.brim_radius > p.crown_radius && p.edge_length > 0.0, "invalid hat parameters: {p:?}");
+    assert!(
+        p.brim_radius > p.crown_radius && p.edge_length > 0.0,
+        "invalid hat parameters: {p:?}"
+    );
     let h = p.edge_length;
     let step = h * 3f64.sqrt() / 2.0;
     let crown = |t: f64| {
@@ -204,7 +229,12 @@ pub fn hat(p: &HatParams) -> Garment {
     profile.extend(resample(brim, step).into_iter().skip(1));
     let sections: Vec<Section> = profile
         .iter()
-        .map(|&[r, y]| Section { center: [0.0, y, 0.0], e1: [1.0, 0.0, 0.0], e2: [0.0, 0.0, 1.0], rho: r })
+        .map(|&[r, y]| Section {
+            center: [0.0, y, 0.0],
+            e1: [1.0, 0.0, 0.0],
+            e2: [0.0, 0.0, 1.0],
+            rho: r,
+        })
         .collect();
     let (mut g, rim) = build(&sections, h);
     g.handles = vec![rim.start, rim.start + rim.count / 2];
@@ -228,13 +258,21 @@ pub fn hat(p: &HatParams) -> Garment {
 ///
 /// Panics unless `bend_radius > radius` and `edge_length > 0`.
 pub fn sock(p: &SockParams) -> Garment {
-    assert!(p.bend_radius > p.radius && p.edge_length > 0.0, "invalid sock parameters: {p:?}");
+    assert!(
+        p.bend_radius > p.radius && p.edge_length > 0.0,
+        "invalid sock parameters: {p:?}"
+    );
     let (r0, rb, b) = (p.radius, p.bend_radius, p.heel_bulge);
     let h = p.edge_length;
     let step = h * 3f64.sqrt() / 2.0;
     let steps = |len: f64| ((len / step).round() as usize).max(1);
     let x = [1.0, 0.0, 0.0];
-    let sec = |center, e2, rho| Section { center, e1: x, e2, rho };
+    let sec = |center, e2, rho| Section {
+        center,
+        e1: x,
+        e2,
+        rho,
+    };
     let toe_end = rb + p.foot_length;
     let down = [0.0, -1.0, 0.0];
     let mut sections = Vec::new();
@@ -242,12 +280,20 @@ pub fn sock(p: &SockParams) -> Garment {
     let n = steps(FRAC_PI_2 * r0);
     for k in 0..=n {
         let lat = FRAC_PI_2 * (1.0 - k as f64 / n as f64);
-        sections.push(sec([0.0, 0.0, toe_end + r0 * lat.sin()], down, r0 * lat.cos()));
+        sections.push(sec(
+            [0.0, 0.0, toe_end + r0 * lat.sin()],
+            down,
+            r0 * lat.cos(),
+        ));
     }
     // Foot tube, from the toe back to the heel bend.
     let n = steps(p.foot_length);
     for k in 1..=n {
-        sections.push(sec([0.0, 0.0, toe_end - p.foot_length * k as f64 / n as f64], down, r0));
+        sections.push(sec(
+            [0.0, 0.0, toe_end - p.foot_length * k as f64 / n as f64],
+            down,
+            r0,
+        ));
     }
     // Heel bend: cross-sections in radial planes through the bend axis (the line through
     // (0, R, R) along x), theta from 90 degrees (foot) to 0 (leg).
@@ -261,13 +307,22 @@ pub fn sock(p: &SockParams) -> Garment {
     // Leg tube, up to the opening.
     let n = steps(p.leg_length);
     for k in 1..=n {
-        sections.push(sec([0.0, rb + p.leg_length * k as f64 / n as f64, 0.0], [0.0, 0.0, -1.0], r0));
+        sections.push(sec(
+            [0.0, rb + p.leg_length * k as f64 / n as f64, 0.0],
+            [0.0, 0.0, -1.0],
+            r0,
+        ));
     }
     let (mut g, top) = build(&sections, h);
     // Angle a on the opening is at x = cos a, z = -sin a: +x, +z, -x, -z are at a = 0, 3/4,
     // 1/2, 1/4 turn.
     let q = top.count / 4;
-    g.handles = vec![top.start, top.start + 3 * q, top.start + 2 * q, top.start + q];
+    g.handles = vec![
+        top.start,
+        top.start + 3 * q,
+        top.start + 2 * q,
+        top.start + q,
+    ];
     g
 }
 
@@ -283,7 +338,11 @@ mod tests {
         a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
     }
     fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
     }
     fn norm(a: [f64; 3]) -> f64 {
         dot(a, a).sqrt()
@@ -300,18 +359,27 @@ mod tests {
             s.sort();
             assert!(seen.insert(s), "duplicate triangle {t:?}");
             let p = t.map(|i| g.positions[i]);
-            assert!(norm(cross(sub(p[1], p[0]), sub(p[2], p[0]))) > 1e-8, "zero area {t:?}");
+            assert!(
+                norm(cross(sub(p[1], p[0]), sub(p[2], p[0]))) > 1e-8,
+                "zero area {t:?}"
+            );
             for k in 0..3 {
                 let (u, v) = (sub(p[(k + 1) % 3], p[k]), sub(p[(k + 2) % 3], p[k]));
                 min_angle = min_angle.min((dot(u, v) / (norm(u) * norm(v))).acos().to_degrees());
-                assert!(directed.insert((t[k], t[(k + 1) % 3])), "edge traversed twice the same way");
+                assert!(
+                    directed.insert((t[k], t[(k + 1) % 3])),
+                    "edge traversed twice the same way"
+                );
             }
         }
         println!("{n} vertices, min angle {min_angle:.1} degrees");
         assert!(min_angle > min_angle_deg);
         // Boundary edges (directed edges without a reverse twin) must form exactly one loop.
-        let bnd: Vec<(usize, usize)> =
-            directed.iter().filter(|&&(a, b)| !directed.contains(&(b, a))).copied().collect();
+        let bnd: Vec<(usize, usize)> = directed
+            .iter()
+            .filter(|&&(a, b)| !directed.contains(&(b, a)))
+            .copied()
+            .collect();
         let next: HashMap<usize, usize> = bnd.iter().copied().collect();
         assert_eq!(next.len(), bnd.len(), "boundary vertex visited twice");
         let (mut v, mut len) = (bnd[0].1, 1);
@@ -352,7 +420,10 @@ mod tests {
         for t in &g.triangles {
             let p = t.map(|i| g.positions[i]);
             let c = [0, 1, 2].map(|k| (p[0][k] + p[1][k] + p[2][k]) / 3.0);
-            assert!(dot(cross(sub(p[1], p[0]), sub(p[2], p[0])), sub(c, inside(c))) > 0.0, "{t:?}");
+            assert!(
+                dot(cross(sub(p[1], p[0]), sub(p[2], p[0])), sub(c, inside(c))) > 0.0,
+                "{t:?}"
+            );
         }
     }
 
@@ -367,17 +438,28 @@ mod tests {
     fn hat_default() {
         let g = hat(&HatParams::default());
         let (nv, nt) = (g.positions.len(), g.triangles.len());
-        println!("hat: {nv} vertices, {nt} triangles, handles {:?}", g.handles);
+        println!(
+            "hat: {nv} vertices, {nt} triangles, handles {:?}",
+            g.handles
+        );
         assert!((550..=650).contains(&nv), "{nv} vertices");
         let boundary = check(&g, 15.0);
-        assert!(boundary.iter().all(|&i| (g.positions[i][0].hypot(g.positions[i][2]) - 3.0).abs() < 1e-9));
+        assert!(boundary
+            .iter()
+            .all(|&i| (g.positions[i][0].hypot(g.positions[i][2]) - 3.0).abs() < 1e-9));
         // Clears the head sphere (radius 2.1 at the origin); about 6 wide.
         assert!(g.positions.iter().all(|&p| norm(p) > 2.15));
         let xs = g.positions.iter().map(|p| p[0]);
         let width = xs.clone().fold(f64::MIN, f64::max) - xs.fold(f64::MAX, f64::min);
         assert!((5.5..=6.5).contains(&width), "width {width}");
         // Crown normals point away from the origin, brim normals up.
-        check_outward(&g, |c| if c[1] > 0.0 { [0.0; 3] } else { [c[0], c[1] - 1.0, c[2]] });
+        check_outward(&g, |c| {
+            if c[1] > 0.0 {
+                [0.0; 3]
+            } else {
+                [c[0], c[1] - 1.0, c[2]]
+            }
+        });
         check_handles(&g, &boundary, &[[3.0, -0.3, 0.0], [-3.0, -0.3, 0.0]]);
         assert_eq!(g, hat(&HatParams::default()), "deterministic");
     }
@@ -387,16 +469,31 @@ mod tests {
         let p = SockParams::default();
         let g = sock(&p);
         let (nv, nt) = (g.positions.len(), g.triangles.len());
-        println!("sock: {nv} vertices, {nt} triangles, handles {:?}", g.handles);
+        println!(
+            "sock: {nv} vertices, {nt} triangles, handles {:?}",
+            g.handles
+        );
         assert!((900..=1100).contains(&nv), "{nv} vertices");
         let boundary = check(&g, 10.0);
         let top = p.bend_radius + p.leg_length;
-        assert!(boundary.iter().all(|&i| (g.positions[i][1] - top).abs() < 1e-9), "boundary is the opening");
+        assert!(
+            boundary
+                .iter()
+                .all(|&i| (g.positions[i][1] - top).abs() < 1e-9),
+            "boundary is the opening"
+        );
         // Leg capsule along y, foot capsule along z, radius 0.8, meeting at the heel corner.
         let o = [0.0; 3];
-        let (leg_end, foot_end) = ([0.0, top + 1.0, 0.0], [0.0, 0.0, p.bend_radius + p.foot_length]);
+        let (leg_end, foot_end) = (
+            [0.0, top + 1.0, 0.0],
+            [0.0, 0.0, p.bend_radius + p.foot_length],
+        );
         let clearance = |q| seg_dist(q, o, leg_end).min(seg_dist(q, o, foot_end)) - 0.8;
-        let min = g.positions.iter().map(|&q| clearance(q)).fold(f64::MAX, f64::min);
+        let min = g
+            .positions
+            .iter()
+            .map(|&q| clearance(q))
+            .fold(f64::MAX, f64::min);
         println!("sock: min clearance {min:.3}");
         assert!(min >= 0.05, "min clearance {min}");
         // Normals point away from the nearest capsule axis.
@@ -409,17 +506,27 @@ mod tests {
             }
         });
         let r = p.radius;
-        check_handles(&g, &boundary, &[[r, top, 0.0], [0.0, top, r], [-r, top, 0.0], [0.0, top, -r]]);
+        check_handles(
+            &g,
+            &boundary,
+            &[[r, top, 0.0], [0.0, top, r], [-r, top, 0.0], [0.0, top, -r]],
+        );
         assert_eq!(g, sock(&p), "deterministic");
     }
 
     #[test]
     fn other_resolutions() {
         for h in [0.15, 0.2, 0.45, 0.6] {
-            let g = hat(&HatParams { edge_length: h, ..Default::default() });
+            let g = hat(&HatParams {
+                edge_length: h,
+                ..Default::default()
+            });
             check(&g, 15.0);
             assert_eq!(g.handles.len(), 2);
-            let g = sock(&SockParams { edge_length: h, ..Default::default() });
+            let g = sock(&SockParams {
+                edge_length: h,
+                ..Default::default()
+            });
             check(&g, 10.0);
             assert_eq!(g.handles.len(), 4);
         }

@@ -17,12 +17,22 @@ pub enum GridPlane {
 /// A `rows x cols` node grid of size `width x height`, centred at the origin, split into
 /// `2 (rows-1)(cols-1)` triangles with alternating diagonals (no shear bias).
 /// Node `(r, c)` has index `r * cols + c`; row 0 is at the low end of the second axis.
-pub fn grid(rows: usize, cols: usize, width: f64, height: f64, plane: GridPlane) -> Result<TriMesh> {
+pub fn grid(
+    rows: usize,
+    cols: usize,
+    width: f64,
+    height: f64,
+    plane: GridPlane,
+) -> Result<TriMesh> {
     if rows < 2 || cols < 2 {
-        return Err(Error::Mesh(format!("grid needs at least 2x2 nodes, got {rows}x{cols}")));
+        return Err(Error::Mesh(format!(
+            "grid needs at least 2x2 nodes, got {rows}x{cols}"
+        )));
     }
     if !(width > 0.0 && height > 0.0) {
-        return Err(Error::Mesh(format!("grid size must be positive, got {width} x {height}")));
+        return Err(Error::Mesh(format!(
+            "grid size must be positive, got {width} x {height}"
+        )));
     }
     let mut positions = Vec::with_capacity(rows * cols);
     for r in 0..rows {

@@ -1,7 +1,7 @@
 //! Triangle meshes: the mesh type, generators (grid, procedural garments) and OBJ i/o.
 
-mod grid;
 pub mod garment;
+mod grid;
 mod obj;
 
 pub use grid::{grid, GridPlane};
@@ -29,10 +29,18 @@ impl TriMesh {
         if triangles.is_empty() {
             return Err(Error::Mesh("mesh has no triangles".into()));
         }
-        if let Some(i) = positions.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-            return Err(Error::Mesh(format!("vertex {i} has a non-finite coordinate")));
+        if let Some(i) = positions
+            .iter()
+            .position(|p| !p.iter().all(|c| c.is_finite()))
+        {
+            return Err(Error::Mesh(format!(
+                "vertex {i} has a non-finite coordinate"
+            )));
         }
-        let mesh = Self { positions, triangles };
+        let mesh = Self {
+            positions,
+            triangles,
+        };
         let diag2 = mesh.bounding_box_diagonal().powi(2);
         let n = mesh.positions.len();
         for (t, tri) in mesh.triangles.iter().enumerate() {
@@ -42,7 +50,9 @@ impl TriMesh {
                 )));
             }
             if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
-                return Err(Error::Mesh(format!("triangle {t} repeats a vertex: {tri:?}")));
+                return Err(Error::Mesh(format!(
+                    "triangle {t} repeats a vertex: {tri:?}"
+                )));
             }
             let area = mesh.triangle_area(t);
             if !(area > 1e-12 * diag2) {
@@ -111,7 +121,12 @@ impl TriMesh {
     }
 
     /// Applies `p -> rotation * (scale * p) + translation` to every vertex.
-    pub fn transform(&mut self, scale: f64, rotation: &nalgebra::Rotation3<f64>, translation: Vec3) {
+    pub fn transform(
+        &mut self,
+        scale: f64,
+        rotation: &nalgebra::Rotation3<f64>,
+        translation: Vec3,
+    ) {
         for p in &mut self.positions {
             *p = rotation * (*p * scale) + translation;
         }

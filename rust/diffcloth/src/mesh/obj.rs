@@ -8,8 +8,10 @@ use std::fmt::Write as _;
 /// Reads an OBJ file's `v` and `f` records. Face entries may be `i`, `i/t`, `i//n` or `i/t/n`,
 /// with negative (relative) indices allowed; other records are ignored.
 pub fn read_obj(path: &std::path::Path) -> Result<TriMesh> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::Io { path: path.display().to_string(), message: e.to_string() })?;
+    let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })?;
     parse_obj(&text).map_err(|e| match e {
         Error::Mesh(msg) => Error::Mesh(format!("{}: {msg}", path.display())),
         other => other,
@@ -30,16 +32,23 @@ pub fn parse_obj(text: &str) -> Result<TriMesh> {
                     .collect::<std::result::Result<_, _>>()
                     .map_err(|e| Error::Mesh(format!("line {}: bad vertex: {e}", lineno + 1)))?;
                 if coords.len() != 3 {
-                    return Err(Error::Mesh(format!("line {}: vertex needs 3 coordinates", lineno + 1)));
+                    return Err(Error::Mesh(format!(
+                        "line {}: vertex needs 3 coordinates",
+                        lineno + 1
+                    )));
                 }
                 positions.push(Vec3::new(coords[0], coords[1], coords[2]));
             }
             Some("f") => {
                 let mut face = Vec::with_capacity(4);
                 for entry in fields {
-                    let index: i64 = entry.split('/').next().unwrap_or("").parse().map_err(|e| {
-                        Error::Mesh(format!("line {}: bad face index {entry:?}: {e}", lineno + 1))
-                    })?;
+                    let index: i64 =
+                        entry.split('/').next().unwrap_or("").parse().map_err(|e| {
+                            Error::Mesh(format!(
+                                "line {}: bad face index {entry:?}: {e}",
+                                lineno + 1
+                            ))
+                        })?;
                     let resolved = if index > 0 {
                         index - 1
                     } else {
@@ -54,7 +63,10 @@ pub fn parse_obj(text: &str) -> Result<TriMesh> {
                     face.push(resolved as usize);
                 }
                 if face.len() < 3 {
-                    return Err(Error::Mesh(format!("line {}: face has fewer than 3 vertices", lineno + 1)));
+                    return Err(Error::Mesh(format!(
+                        "line {}: face has fewer than 3 vertices",
+                        lineno + 1
+                    )));
                 }
                 for k in 1..face.len() - 1 {
                     triangles.push([face[0], face[k], face[k + 1]]);
@@ -75,8 +87,10 @@ pub fn write_obj(path: &std::path::Path, mesh: &TriMesh, positions: &[Vec3]) -> 
     for t in &mesh.triangles {
         let _ = writeln!(out, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);
     }
-    std::fs::write(path, out)
-        .map_err(|e| Error::Io { path: path.display().to_string(), message: e.to_string() })
+    std::fs::write(path, out).map_err(|e| Error::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })
 }
 
 #[cfg(test)]
