@@ -467,19 +467,20 @@ impl PySimulator {
         tolerance: f64,
         max_iterations: usize,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let solver =
-            match solver {
-                "direct" => AdjointSolver::Direct,
-                "krylov" => AdjointSolver::Krylov,
-                "fixed_point" => AdjointSolver::FixedPoint,
-                other => return Err(raise(
+        let solver = match solver {
+            "direct" => AdjointSolver::Direct,
+            "krylov" => AdjointSolver::Krylov,
+            "fixed_point" => AdjointSolver::FixedPoint,
+            other => {
+                return Err(raise(
                     py,
                     "ParameterError",
                     format!(
                         "solver must be \"direct\", \"krylov\" or \"fixed_point\", got {other:?}"
                     ),
-                )),
-            };
+                ))
+            }
+        };
         let read =
             |name: &str, a: Option<numpy::PyReadonlyArray3<'_, f64>>| -> PyResult<Vec<Vec<Vec3>>> {
                 let Some(a) = a else { return Ok(Vec::new()) };

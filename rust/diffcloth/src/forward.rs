@@ -77,6 +77,9 @@ pub struct StepInput<'a> {
     pub external_forces: Option<&'a [Vec3]>,
 }
 
+/// Largest step scale `a` of the saddle escape in [`Simulator::solve_pd`].
+const ESCAPE_MAX_SCALE: f64 = 64.0;
+
 pub struct Simulator {
     config: SceneConfig,
     mesh: TriMesh,
@@ -744,6 +747,15 @@ impl Simulator {
     /// extrapolation is kept only if its PD update `|G(x) - x|` is smaller than the last
     /// iterate's; otherwise the plain step `G(x_k)` (already computed) is taken. Either way a
     /// rejection restarts the history.
+    ///
+    /// Leaving a saddle. When the cloth buckles or snaps through, the iterates can first
+    /// approach a saddle of E; Anderson, a secant method for fixed points, is drawn to the
+    /// saddle (its extrapolations raise E and are rejected) and plain PD leaves it only at the
+    /// slow geometric rate of the unstable direction (Hat: hundreds of iterations with the
+    /// update growing about 3 % per iteration while E falls). Two plain updates in a row that
+    /// grow while E falls mark that regime; there the step `x + a (G(x) - x)` is tried with
+    /// `a` doubling up to [`ESCAPE_MAX_SCALE`] while E keeps falling. Every accepted point
+    /// still lowers E, so the safeguard is the same; the first shrinking update ends it.
     fn solve_pd(&mut self) -> StepStats {
         self.iterate.copy_from_slice(&self.y);
         self.anderson.reset();
@@ -771,9 +783,33 @@ impl Simulator {
         let mut residual = self.global_step();
         let mut iterations = 1;
         self.record(energy, residual);
+        // Saddle escape (see above): consecutive growing plain updates, and the step scale.
+        let mut growing = 0;
+        let mut escape_scale = 1.0;
         while residual > tol && iterations < max_it {
             let mut accepted = false;
-            if self.solver.anderson {
+            let mut extrapolated_by_anderson = false;
+            let previous_residual = residual;
+            if energy_guard && escape_scale > 1.0 {
+                for ((e, x), u) in self
+                    .extrapolated
+                    .iter_mut()
+                    .zip(&self.iterate)
+                    .zip(&self.update)
+                {
+                    *e = x + escape_scale * u;
+                }
+                let trial = self.local_step(Buffer::Extrapolated);
+                if trial < energy {
+                    std::mem::swap(&mut self.iterate, &mut self.extrapolated);
+                    energy = trial;
+                    accepted = true;
+                    escape_scale = (2.0 * escape_scale).min(ESCAPE_MAX_SCALE);
+                    self.profile.escape_steps += 1;
+                } else {
+                    escape_scale = 1.0;
+                }
+            } else if self.solver.anderson {
                 self.anderson.push(&self.update, &self.mapped);
                 if self
                     .anderson
@@ -785,6 +821,7 @@ impl Simulator {
                             std::mem::swap(&mut self.iterate, &mut self.extrapolated);
                             energy = trial;
                             accepted = true;
+                            extrapolated_by_anderson = true;
                         }
                     } else {
                         // Residual guard: evaluate G at the extrapolation, keep it if better.
@@ -822,6 +859,16 @@ impl Simulator {
             self.record(energy, residual);
             if reached_user_tol.is_none() && residual <= user_tol {
                 reached_user_tol = Some(iterations);
+            }
+            if energy_guard {
+                let grew = !extrapolated_by_anderson && residual > previous_residual;
+                growing = if grew { growing + 1 } else { 0 };
+                if growing == 0 {
+                    escape_scale = 1.0;
+                } else if growing >= 2 && escape_scale == 1.0 {
+                    escape_scale = 2.0;
+                    self.anderson.reset();
+                }
             }
         }
         if let Some(at) = reached_user_tol {

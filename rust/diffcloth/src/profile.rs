@@ -15,6 +15,8 @@ pub struct Profile {
     pub polish_iterations: u64,
     /// Accelerated iterates rejected by the energy guard (the plain PD step was taken).
     pub acceleration_rejections: u64,
+    /// Iterations that took a scaled step `x + a (G(x) - x)`, `a > 1`, to leave a saddle.
+    pub escape_steps: u64,
     /// Local step: projections onto each constraint set and the right-hand side gather.
     pub local: Duration,
     /// Global step: the prefactored sparse solve.
@@ -47,6 +49,7 @@ impl Profile {
                 "acceleration_rejections",
                 self.acceleration_rejections as f64,
             ),
+            ("escape_steps", self.escape_steps as f64),
             ("polish_iterations", self.polish_iterations as f64),
             ("refactorizations", self.refactorizations as f64),
             ("local_s", self.local.as_secs_f64()),

@@ -1,4 +1,4 @@
-use diffcloth::{SceneConfig, Simulator, Vec3};
+use diffcloth::{Effect, SceneConfig, Simulator, Vec3};
 use std::path::PathBuf;
 
 pub fn configs_dir() -> PathBuf {
@@ -12,6 +12,21 @@ pub fn sim_from_toml(text: &str) -> Simulator {
 
 pub fn load_config(name: &str) -> SceneConfig {
     SceneConfig::from_toml_file(&configs_dir().join(format!("{name}.toml"))).unwrap()
+}
+
+/// A shipped scene without its contact effects (obstacles, friction, self-collision).
+pub fn contact_free_config(name: &str) -> SceneConfig {
+    let mut cfg = load_config(name);
+    cfg.effects.retain(|e| {
+        !matches!(
+            e,
+            Effect::ObstacleContact | Effect::Friction | Effect::SelfCollision
+        )
+    });
+    cfg.obstacles.clear();
+    cfg.self_collision = None;
+    cfg.contact = None;
+    cfg
 }
 
 /// Deterministic pseudo-random vectors in [-amp, amp]^3.

@@ -1,6 +1,6 @@
 //! Analytic gradients against central finite differences of the whole rollout.
 use crate::common::*;
-use diffcloth::{AdjointSolver, BackwardOptions, Effect, Params, Simulator, StepInput, Vec3};
+use diffcloth::{AdjointSolver, BackwardOptions, Params, Simulator, StepInput, Vec3};
 
 /// Inputs of a rollout that the gradients are taken with respect to.
 #[derive(Clone)]
@@ -359,16 +359,7 @@ max_iterations = 20000
 
 /// A shipped garment scene without its contact effects, solved with a fixed iteration count.
 fn contact_free_garment(name: &str, iterations: usize) -> Simulator {
-    let mut cfg = load_config(name);
-    cfg.effects.retain(|e| {
-        !matches!(
-            e,
-            Effect::ObstacleContact | Effect::Friction | Effect::SelfCollision
-        )
-    });
-    cfg.obstacles.clear();
-    cfg.self_collision = None;
-    cfg.contact = None;
+    let mut cfg = contact_free_config(name);
     // A fixed iteration count (no stopping test): the solution is then a smooth function of
     // the inputs, which keeps the finite differences free of stopping-rule noise.
     cfg.solver.tolerance = 0.0;
