@@ -125,7 +125,10 @@ pub const TRUSTED_FORWARD_RESIDUAL: f64 = 1e-9;
 /// The linearization of one step at its end state: per-constraint projection Jacobians.
 struct Linearization {
     stretch: Vec<[[f64; 6]; 6]>,
+    /// Per bending constraint: its weight times its projection Jacobian.
     bend: Vec<Matrix3<f64>>,
+    /// Per bending constraint: the sum of its stencil coefficients (the center's).
+    bend_coef_sum: Vec<f64>,
 }
 
 impl Linearization {
@@ -133,6 +136,9 @@ impl Linearization {
         Self {
             stretch: vec![[[0.0; 6]; 6]; sim.stretch().map_or(0, Stretch::len)],
             bend: vec![Matrix3::zeros(); sim.bend().map_or(0, Bend::len)],
+            bend_coef_sum: sim.bend().map_or_else(Vec::new, |b| {
+                (0..b.len()).map(|i| b.stencil(i).1.iter().sum()).collect()
+            }),
         }
     }
 
@@ -145,7 +151,7 @@ impl Linearization {
         }
         if let Some(b) = sim.bend() {
             for (i, j) in self.bend.iter_mut().enumerate() {
-                *j = b.projection_jacobian(i, x);
+                *j = b.weight(i) * b.projection_jacobian(i, x);
             }
         }
     }
@@ -178,16 +184,16 @@ impl Linearization {
         if let Some(bend) = sim.bend() {
             for (i, &center) in bend.centers().iter().enumerate() {
                 let (nbrs, coefs) = bend.stencil(i);
-                let dv: Vec3 = nbrs
-                    .iter()
-                    .zip(coefs)
-                    .map(|(&j, &c)| c * (v[j] - v[center]))
-                    .sum();
-                let q = bend.weight(i) * (self.bend[i] * dv);
+                let coef_sum = self.bend_coef_sum[i];
+                let mut dv = -coef_sum * v[center];
+                for (&j, &c) in nbrs.iter().zip(coefs) {
+                    dv += c * v[j];
+                }
+                let q = self.bend[i] * dv;
                 for (&j, &c) in nbrs.iter().zip(coefs) {
                     out[j] -= c * q;
-                    out[center] += c * q;
                 }
+                out[center] += coef_sum * q;
             }
         }
     }
@@ -234,7 +240,7 @@ impl Linearization {
                 let nodes: Vec<(usize, f64)> = std::iter::once((center, center_coef))
                     .chain(nbrs.iter().copied().zip(coefs.iter().copied()))
                     .collect();
-                let jw = bend.weight(i) * self.bend[i];
+                let jw = self.bend[i];
                 for &(a, ca) in &nodes {
                     for &(b, cb) in &nodes {
                         for c in 0..3 {
