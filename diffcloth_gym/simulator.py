@@ -258,6 +258,15 @@ class Simulator:
         """Signed distance of every node to obstacle ``index`` (positive outside), (n,)."""
         return np.asarray(self._core.obstacle_distance(index))
 
+    def set_trace(self, on: bool = True) -> None:
+        """Records each step's PD convergence trace (see :meth:`trace`)."""
+        self._core.set_trace(bool(on))
+
+    def trace(self) -> np.ndarray:
+        """The last step's convergence trace, (iterations, 2): the step objective E (without
+        contact) and the RMS PD update |G(x) - x| in metres after each iteration."""
+        return np.asarray(self._core.trace())
+
     def mechanical_energy(self) -> float:
         """Kinetic + gravitational + elastic energy of the current state (J)."""
         return self._core.mechanical_energy()

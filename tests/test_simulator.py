@@ -155,3 +155,16 @@ def test_write_obj_round_trip(tmp_path, wind):
     sim = Simulator.from_config({"h": 0.01, "effects": [], "material": {"density": 1.0},
                                  "mesh": {"kind": "obj", "path": str(path)}})
     np.testing.assert_allclose(sim.rest_positions, wind.positions, rtol=0, atol=1e-12)
+
+
+def test_trace_has_one_row_per_iteration_and_energy_never_rises(small):
+    small.set_trace(True)
+    small.reset(v=np.random.default_rng(3).normal(0, 0.5, (small.num_nodes, 3)))
+    stats = small.step()
+    trace = small.trace()
+    assert trace.shape == (stats["iterations"], 2)
+    assert trace[-1, 1] == pytest.approx(stats["residual"])
+    assert np.all(np.diff(trace[:, 0]) <= 1e-12 * np.abs(trace[:-1, 0]))
+    small.set_trace(False)
+    small.step()
+    assert small.trace().shape == (0, 2)

@@ -552,6 +552,21 @@ impl PySimulator {
         Ok(d)
     }
 
+    /// Records (on) or stops recording (off) the PD convergence trace of each step.
+    fn set_trace(&mut self, on: bool) {
+        self.inner.set_trace(on);
+    }
+
+    /// The last step's convergence trace, shape (iterations, 2): the step objective E and
+    /// the RMS PD update after each iteration (empty when tracing is off).
+    fn trace<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let t = self.inner.trace().unwrap_or_default();
+        let flat: Vec<f64> = t.iter().flat_map(|&(e, r)| [e, r]).collect();
+        numpy::ndarray::Array2::from_shape_vec((t.len(), 2), flat)
+            .expect("trace shape")
+            .to_pyarray(py)
+    }
+
     /// Kinetic + gravitational + elastic energy of the current state.
     fn mechanical_energy(&mut self) -> f64 {
         self.inner.mechanical_energy()

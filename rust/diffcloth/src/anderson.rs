@@ -39,6 +39,11 @@ impl Anderson {
         }
     }
 
+    /// Number of past iterates kept.
+    pub fn history(&self) -> usize {
+        self.history
+    }
+
     pub fn reset(&mut self) {
         self.columns = 0;
         self.next = 0;

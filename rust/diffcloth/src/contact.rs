@@ -120,6 +120,11 @@ impl ContactSet {
         self.contacts.is_empty()
     }
 
+    /// No contact exerts a force at the last solve (true without contacts).
+    pub fn all_take_off(&self) -> bool {
+        self.contacts.iter().all(|c| c.branch == Branch::TakeOff)
+    }
+
     pub fn counts(&self) -> BranchCounts {
         let mut c = BranchCounts::default();
         for k in &self.contacts {

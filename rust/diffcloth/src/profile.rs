@@ -15,6 +15,8 @@ pub struct Profile {
     pub polish_iterations: u64,
     /// Accelerated iterates rejected by the energy guard (the plain PD step was taken).
     pub acceleration_rejections: u64,
+    /// Contact steps whose residual-guarded acceleration stalled and finished with plain PD.
+    pub acceleration_stalls: u64,
     /// Iterations that took a scaled step `x + a (G(x) - x)`, `a > 1`, to leave a saddle.
     pub escape_steps: u64,
     /// Local step: projections onto each constraint set and the right-hand side gather.
@@ -49,6 +51,7 @@ impl Profile {
                 "acceleration_rejections",
                 self.acceleration_rejections as f64,
             ),
+            ("acceleration_stalls", self.acceleration_stalls as f64),
             ("escape_steps", self.escape_steps as f64),
             ("polish_iterations", self.polish_iterations as f64),
             ("refactorizations", self.refactorizations as f64),
