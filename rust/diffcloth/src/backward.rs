@@ -489,6 +489,18 @@ struct AdjointOperator<'a> {
     contacts: Vec<ContactLin>,
     coupling: ContactCoupling,
     buffers: Mutex<(Vec<Vec3>, Vec<Vec3>)>,
+    /// Scratch of the contact term (kept across applications: no allocation per iteration).
+    contact_scratch: Mutex<ContactScratch>,
+}
+
+#[derive(Default)]
+struct ContactScratch {
+    /// Per contact: the impulse adjoints.
+    y: Vec<Vec3>,
+    /// Per node: `u`, `-dP u` and `P u`.
+    u: Vec<Vec3>,
+    t: Vec<Vec3>,
+    pu: Vec<Vec3>,
 }
 
 impl std::fmt::Debug for AdjointOperator<'_> {
@@ -508,24 +520,25 @@ impl AdjointOperator<'_> {
         }
         let n = v.len();
         let h = self.sim.params().h;
-        let mut u = vec![Vec3::zeros(); n];
-        let mut y: Vec<Vec3> = self
-            .contacts
-            .iter()
-            .map(|c| c.impulse_adjoint(v, h) * h)
-            .collect();
-        self.coupling.solve(&mut y);
-        for (c, yc) in self.contacts.iter().zip(&y) {
+        let mut guard = self.contact_scratch.lock().expect("contact scratch");
+        let ContactScratch { y, u, t, pu } = &mut *guard;
+        y.clear();
+        y.extend(self.contacts.iter().map(|c| c.impulse_adjoint(v, h) * h));
+        self.coupling.solve(y);
+        u.clear();
+        u.resize(n, Vec3::zeros());
+        for (c, yc) in self.contacts.iter().zip(y.iter()) {
             let w = c.phi.transpose() * yc;
             for &(k, s) in &c.s {
                 u[k] += s * w;
             }
         }
         // out -= (dP - K) u, with K u = P u - M u / h^2.
-        let mut t = vec![Vec3::zeros(); n];
-        self.lin.sub_dp(self.sim, &u, &mut t); // t = -dP u
-        let mut pu = vec![Vec3::zeros(); n];
-        self.sim.factor().mul_xyz(&u, &mut pu);
+        t.clear();
+        t.resize(n, Vec3::zeros());
+        self.lin.sub_dp(self.sim, u, t); // t = -dP u
+        pu.resize(n, Vec3::zeros());
+        self.sim.factor().mul_xyz(u, pu);
         let mass = self.sim.masses();
         for i in 0..n {
             let ku = pu[i] - mass[i] / (h * h) * u[i];
@@ -873,6 +886,7 @@ impl Simulator {
             contacts: Vec::new(),
             coupling: ContactCoupling::default(),
             buffers: Mutex::new((vec![Vec3::zeros(); n], vec![Vec3::zeros(); n])),
+            contact_scratch: Mutex::default(),
         };
         let mut scratch = MemBuffer::new(StackReq::any_of(&[
             bicgstab_scratch(
