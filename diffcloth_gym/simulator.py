@@ -62,6 +62,9 @@ class Simulator:
         self._core = core
         #: The scene config this simulator was built from (a dict).
         self.config = config
+        # Bumped by everything that changes the tape (reset, step, set_recording), so a
+        # holder of a recorded rollout (diffcloth_gym.torch) can tell it is still the same.
+        self._tape_version = 0
 
     @classmethod
     def from_config(cls, config: str | Path | Mapping[str, Any]) -> "Simulator":
@@ -78,6 +81,7 @@ class Simulator:
         """Sets positions ``x`` (default: rest shape) and velocities ``v`` (default: zero),
         time to 0 and attachment targets to the attached nodes' positions."""
         n = self.num_nodes
+        self._tape_version += 1
         self._core.reset(None if x is None else _nodes("x", x, n), None if v is None else _nodes("v", v, n))
 
     def step(self, attachment_targets: Any = None, external_forces: Any = None, steps: int = 1) -> dict:
@@ -93,6 +97,7 @@ class Simulator:
         k = len(self.attachment_nodes)
         targets = None if attachment_targets is None else _nodes("attachment_targets", attachment_targets, k)
         forces = None if external_forces is None else _nodes("external_forces", external_forces, self.num_nodes)
+        self._tape_version += 1
         return self._core.step(targets, forces, steps)
 
     @property
@@ -180,6 +185,7 @@ class Simulator:
         K-th state and each step's inputs are kept (memory no longer grows with the mesh size
         times the horizon); :meth:`backward` re-simulates one segment at a time and returns the
         same gradients."""
+        self._tape_version += 1
         self._core.set_recording(bool(on), checkpoint_every)
 
     def tape_info(self) -> tuple[int, int]:

@@ -8,8 +8,11 @@ per-node ``forces`` and the scalar/vector physical parameters given in ``params`
 (``k_stretch``, ``k_bend``, ``k_attach``, ``density``, ``wind_omega``, ``wind_phi``,
 ``gravity``, ``wind_direction``). Nothing is clipped.
 
-The backward of a step re-simulates that step from its saved inputs with a one-step tape
-(deterministic), so memory does not grow with the horizon beyond the states autograd keeps.
+``rollout`` is one autograd node: its forward records the whole rollout on the simulator's
+tape (optionally checkpointed) and its backward runs one adjoint pass over it, warm-started
+from step to step, with no second forward. If the simulator was used in between (its tape
+changed), the backward first re-records the rollout from the saved inputs (deterministic).
+The backward of a single ``step`` re-simulates that step with a one-step tape.
 """
 
 from __future__ import annotations
@@ -57,11 +60,7 @@ class StepFunction(torch.autograd.Function):
                   _np(forces) if ctx.has_forces else None, ctx.params, ctx.time, record=True)
         g = sim.backward(dl_dx=_np(gx)[None], dl_dv=_np(gv)[None], solver="krylov", tolerance=1e-12)
         sim.set_recording(False)
-        if g["warnings"]:
-            import warnings
-
-            for w in g["warnings"]:
-                warnings.warn(f"diffcloth gradient: {w}", stacklevel=2)
+        _warn(g)
         as_t = lambda a: torch.as_tensor(np.asarray(a), dtype=x.dtype, device=x.device)  # noqa: E731
         grads = [None, None, None, as_t(g["x0"]), as_t(g["v0"])]
         grads.append(as_t(g["attachment_targets"][0]) if ctx.has_targets else None)
@@ -70,36 +69,99 @@ class StepFunction(torch.autograd.Function):
         return tuple(grads)
 
 
+def _warn(g: dict) -> None:
+    if g["warnings"]:
+        import warnings
+
+        for w in g["warnings"]:
+            warnings.warn(f"diffcloth gradient: {w}", stacklevel=3)
+
+
+def _record_rollout(sim: Simulator, x0, v0, targets, forces, params: dict, steps: int, checkpoint_every):
+    if params:
+        sim.set_params(**params)
+    sim.reset(x=x0, v=v0)
+    sim.set_recording(True, checkpoint_every)
+    xs, vs = [], []
+    for n in range(steps):
+        sim.step(attachment_targets=None if targets is None else targets[n],
+                 external_forces=None if forces is None else forces[n])
+        xs.append(sim.positions)
+        vs.append(sim.velocities)
+    return np.stack(xs), np.stack(vs)
+
+
+class RolloutFunction(torch.autograd.Function):
+    """A whole rollout as one autograd function (one tape, one adjoint pass). Inputs: sim,
+    steps, checkpoint_every, param names, x0, v0, targets (T, k, 3), forces (T, n, 3), then
+    one tensor per named parameter."""
+
+    @staticmethod
+    def forward(ctx, sim, steps, checkpoint_every, names, x0, v0, targets, forces, *values):
+        params = {k: _np(t).tolist() if t.dim() else float(t) for k, t in zip(names, values)}
+        inputs = (_np(x0), _np(v0), _np(targets), _np(forces))
+        xs, vs = _record_rollout(sim, *inputs, params, steps, checkpoint_every)
+        ctx.sim, ctx.steps, ctx.checkpoint_every, ctx.names, ctx.params = sim, steps, checkpoint_every, names, params
+        ctx.inputs, ctx.tape_version = inputs, sim._tape_version
+        ctx.has_targets, ctx.has_forces = targets is not None, forces is not None
+        return torch.from_numpy(xs).to(x0), torch.from_numpy(vs).to(x0)
+
+    @staticmethod
+    def backward(ctx, gxs, gvs):
+        sim = ctx.sim
+        if sim._tape_version != ctx.tape_version:
+            _record_rollout(sim, *ctx.inputs, ctx.params, ctx.steps, ctx.checkpoint_every)
+            ctx.tape_version = sim._tape_version
+        g = sim.backward(dl_dx=_np(gxs), dl_dv=_np(gvs), solver="krylov", tolerance=1e-12)
+        _warn(g)
+        like = gxs
+        as_t = lambda a: torch.as_tensor(np.asarray(a), dtype=like.dtype, device=like.device)  # noqa: E731
+        grads = [None, None, None, None, as_t(g["x0"]), as_t(g["v0"])]
+        grads.append(as_t(np.stack(g["attachment_targets"])) if ctx.has_targets else None)
+        grads.append(as_t(np.stack(g["external_forces"])) if ctx.has_forces else None)
+        grads += [as_t(g[name]) for name in ctx.names]
+        return tuple(grads)
+
+
+def _check_inputs(params: dict, tensors) -> tuple:
+    unknown = set(params) - set(PARAM_NAMES)
+    if unknown:
+        raise ValueError(f"unknown differentiable parameters {sorted(unknown)}; known: {PARAM_NAMES}")
+    for name, t in [*tensors, *params.items()]:
+        if t is not None and t.dtype != torch.float64:
+            raise ValueError(f"{name} must be float64 (the simulator and its gradients are double precision)")
+    return tuple(params)
+
+
 def step(sim: Simulator, x: torch.Tensor, v: torch.Tensor, targets: torch.Tensor | None = None,
          forces: torch.Tensor | None = None, params: dict | None = None, time: float = 0.0):
     """One differentiable step from state ``(x, v)`` at simulated ``time``; returns
     ``(x_next, v_next)``. ``params`` maps parameter names to float64 tensors (scalars, or
     3-vectors for ``gravity`` and ``wind_direction``)."""
     params = params or {}
-    unknown = set(params) - set(PARAM_NAMES)
-    if unknown:
-        raise ValueError(f"unknown differentiable parameters {sorted(unknown)}; known: {PARAM_NAMES}")
-    for name, t in [("x", x), ("v", v), ("targets", targets), ("forces", forces), *params.items()]:
-        if t is not None and t.dtype != torch.float64:
-            raise ValueError(f"{name} must be float64 (the simulator and its gradients are double precision)")
-    names = tuple(params)
+    names = _check_inputs(params, [("x", x), ("v", v), ("targets", targets), ("forces", forces)])
     return StepFunction.apply(sim, float(time), names, x, v, targets, forces, *[params[k] for k in names])
 
 
 def rollout(sim: Simulator, x0: torch.Tensor, v0: torch.Tensor, targets: torch.Tensor | None = None,
-            forces: torch.Tensor | None = None, params: dict | None = None, steps: int | None = None):
-    """Chains ``steps`` differentiable steps (default: the length of ``targets``/``forces``);
-    ``targets`` (T, k, 3) and ``forces`` (T, n, 3) give each step's inputs. Returns the
-    positions and velocities after every step, each (T, n, 3)."""
+            forces: torch.Tensor | None = None, params: dict | None = None, steps: int | None = None,
+            checkpoint_every: int | None = None):
+    """``steps`` differentiable steps from ``(x0, v0)`` at time 0 (default: the length of
+    ``targets``/``forces``); ``targets`` (T, k, 3) and ``forces`` (T, n, 3) give each step's
+    inputs. Returns the positions and velocities after every step, each (T, n, 3).
+
+    One tape and one adjoint pass for the whole rollout (``checkpoint_every=K`` keeps only
+    every K-th state: memory bounded, backward re-simulates segments). The simulator is left
+    at the rollout's end state, with the tape recording."""
     if steps is None:
         lengths = {len(a) for a in (targets, forces) if a is not None}
         if len(lengths) != 1:
             raise ValueError("give `steps`, or targets/forces with one entry per step")
         steps = lengths.pop()
-    h = sim.params()["h"]
-    x, v, xs, vs = x0, v0, [], []
-    for n in range(steps):
-        x, v = step(sim, x, v, None if targets is None else targets[n], None if forces is None else forces[n], params, time=n * h)
-        xs.append(x)
-        vs.append(v)
-    return torch.stack(xs), torch.stack(vs)
+    for name, a in (("targets", targets), ("forces", forces)):
+        if a is not None and len(a) != steps:
+            raise ValueError(f"{name} has {len(a)} entries for {steps} steps")
+    params = params or {}
+    names = _check_inputs(params, [("x0", x0), ("v0", v0), ("targets", targets), ("forces", forces)])
+    return RolloutFunction.apply(sim, int(steps), checkpoint_every, names, x0, v0, targets, forces,
+                                 *[params[k] for k in names])
