@@ -367,11 +367,19 @@ fn linearize_contacts(sim: &Simulator, rec: &StepRecord) -> Result<Vec<ContactLi
 /// each contact's law sees the others' impulses, `d_c = S_c D + sum_{c'} T_cc' J_c' - m v_obs`
 /// with `T_cc' = sum_{k in c and c'} s_ck e_c'k`. Linearized, `dJ = (I - B T)^{-1} B S dD` with
 /// `B = diag(Phi'_c)`, so the adjoint of the impulses is `y = (I - T^T B^T)^{-1} zhat`, solved
-/// per group of coupled contacts (dense LU, factored once per step).
+/// per group of coupled contacts (a dense inverse per group, formed once per step).
+///
+/// A closed loop of sticking contacts (two nodes each stuck to the floor and to each other)
+/// is redundant: the impulses are not unique, only their sum on each node is, and
+/// `I - T^T B^T` is singular. Its adjoint system is consistent (the loss sees only the nodes'
+/// motion), so the minimum-norm solution, from the pseudo-inverse, gives the unique `u`.
 #[derive(Default)]
 struct ContactCoupling {
-    groups: Vec<(Vec<usize>, nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>)>,
+    groups: Vec<(Vec<usize>, nalgebra::DMatrix<f64>)>,
 }
+
+/// Singular values below this fraction of the largest are treated as zero (redundant loops).
+const COUPLING_RANK_TOLERANCE: f64 = 1e-10;
 
 impl ContactCoupling {
     fn new(contacts: &[ContactLin], nodes: usize) -> Result<Self> {
@@ -432,13 +440,12 @@ impl ContactCoupling {
                     }
                 }
             }
-            let lu = m.lu();
-            if !lu.is_invertible() {
-                return Err(Error::Solver(
-                    "the coupled contact linearization is singular".into(),
-                ));
-            }
-            groups.push((group, lu));
+            let svd = m.svd(true, true);
+            let largest = svd.singular_values.max();
+            let inverse = svd
+                .pseudo_inverse(COUPLING_RANK_TOLERANCE * largest)
+                .map_err(|e| Error::Solver(format!("coupled contact linearization: {e}")))?;
+            groups.push((group, inverse));
         }
         Ok(Self { groups })
     }
@@ -447,14 +454,11 @@ impl ContactCoupling {
     fn inverse_groups(&self, contacts: usize) -> Vec<(Vec<usize>, nalgebra::DMatrix<f64>)> {
         let mut grouped = vec![false; contacts];
         let mut out: Vec<(Vec<usize>, nalgebra::DMatrix<f64>)> = Vec::new();
-        for (group, lu) in &self.groups {
+        for (group, inverse) in &self.groups {
             for &c in group {
                 grouped[c] = true;
             }
-            let inv = lu
-                .try_inverse()
-                .unwrap_or_else(|| nalgebra::DMatrix::identity(3 * group.len(), 3 * group.len()));
-            out.push((group.clone(), inv));
+            out.push((group.clone(), inverse.clone()));
         }
         out.extend(
             (0..contacts)
@@ -466,17 +470,16 @@ impl ContactCoupling {
 
     /// Replaces each contact's impulse adjoint `zhat_c` by `y_c`.
     fn solve(&self, zhat: &mut [Vec3]) {
-        for (group, lu) in &self.groups {
+        for (group, inverse) in &self.groups {
             let mut rhs = nalgebra::DVector::<f64>::zeros(3 * group.len());
             for (b, &c) in group.iter().enumerate() {
                 for r in 0..3 {
                     rhs[3 * b + r] = zhat[c][r];
                 }
             }
-            if let Some(y) = lu.solve(&rhs) {
-                for (b, &c) in group.iter().enumerate() {
-                    zhat[c] = Vec3::new(y[3 * b], y[3 * b + 1], y[3 * b + 2]);
-                }
+            let y = inverse * rhs;
+            for (b, &c) in group.iter().enumerate() {
+                zhat[c] = Vec3::new(y[3 * b], y[3 * b + 1], y[3 * b + 2]);
             }
         }
     }

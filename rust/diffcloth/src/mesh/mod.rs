@@ -12,6 +12,11 @@ use crate::Vec3;
 use std::collections::HashMap;
 
 /// An indexed triangle mesh. Its vertex positions at construction are the rest shape.
+/// Smallest accepted [`TriMesh::triangle_aspect`]. Measured: a free-falling grid with one
+/// sliver of aspect 1e-8 gains 1000x its energy in 20 steps (bending), 1e-7 3.7x in 100, and
+/// 3e-7 and above stay stable; the reference meshes' smallest is 3e-2.
+pub const MIN_ASPECT: f64 = 1e-6;
+
 #[derive(Debug, Clone)]
 pub struct TriMesh {
     pub positions: Vec<Vec3>,
@@ -60,8 +65,25 @@ impl TriMesh {
                     "triangle {t} {tri:?} is degenerate (area {area:.3e}); remove it or repair the mesh"
                 )));
             }
+            let aspect = mesh.triangle_aspect(t);
+            if aspect < MIN_ASPECT {
+                return Err(Error::Mesh(format!(
+                    "triangle {t} {tri:?} is a sliver (2 area / longest edge^2 = {aspect:.1e}, below {MIN_ASPECT:.0e}): \
+                     its bending weights (cotangents, ~1/aspect) make the step unstable; remove it or repair the mesh"
+                )));
+            }
         }
         Ok(mesh)
+    }
+
+    /// `2 area / (longest edge)^2`: about 0.87 for an equilateral triangle, 0 for a sliver.
+    pub fn triangle_aspect(&self, t: usize) -> f64 {
+        let [a, b, c] = self.triangles[t].map(|i| self.positions[i]);
+        let longest = (b - a)
+            .norm_squared()
+            .max((c - b).norm_squared())
+            .max((a - c).norm_squared());
+        2.0 * self.triangle_area(t) / longest
     }
 
     pub fn num_vertices(&self) -> usize {

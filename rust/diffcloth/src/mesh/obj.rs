@@ -113,6 +113,11 @@ mod tests {
         assert!(err.to_string().contains("degenerate"), "{err}");
         let err = parse_obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n").unwrap_err();
         assert!(err.to_string().contains("references vertex 3"), "{err}");
+        // A sliver: 1 m long, 1e-7 m high (aspect 2e-7), next to a normal triangle.
+        let sliver = "v 0 0 0\nv 1 0 0\nv 0.5 1e-7 0\nv 0.5 -1 0\nf 1 2 3\nf 1 4 2\n";
+        let err = parse_obj(sliver).unwrap_err();
+        assert!(err.to_string().contains("sliver"), "{err}");
+        assert!(parse_obj(&sliver.replace("1e-7", "1e-5")).is_ok());
     }
 
     #[test]
