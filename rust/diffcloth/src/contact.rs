@@ -159,22 +159,25 @@ impl ContactSet {
             let (offset, velocity) = obstacle.motion.at(t);
             let obstacle_reach = settings.thickness + settings.margin + 2.0 * h * velocity.norm();
             for (j, (p, vj)) in x.iter().zip(v).enumerate() {
-                let (distance, normal) = obstacle.shape.distance(&(p - offset));
-                if distance < obstacle_reach + 2.0 * h * vj.norm() {
-                    self.contacts.push(Contact {
-                        kind: ContactKind::Obstacle {
-                            node: j,
-                            obstacle: o,
-                        },
-                        normal,
-                        gap: distance - settings.thickness,
-                        mu: friction(obstacle.mu),
-                        obstacle_velocity: velocity,
-                        mass: mass[j],
-                        branch: Branch::TakeOff,
-                        impulse: Vec3::zeros(),
+                let reach = obstacle_reach + 2.0 * h * vj.norm();
+                let contacts = &mut self.contacts;
+                obstacle
+                    .shape
+                    .for_each_contact(&(p - offset), reach, |distance, normal| {
+                        contacts.push(Contact {
+                            kind: ContactKind::Obstacle {
+                                node: j,
+                                obstacle: o,
+                            },
+                            normal,
+                            gap: distance - settings.thickness,
+                            mu: friction(obstacle.mu),
+                            obstacle_velocity: velocity,
+                            mass: mass[j],
+                            branch: Branch::TakeOff,
+                            impulse: Vec3::zeros(),
+                        });
                     });
-                }
             }
         }
         if let Some(sc) = self_collision {

@@ -102,18 +102,11 @@ impl Shape {
             } => {
                 // Inside a convex pit the distance to its boundary is the smallest distance to
                 // a wall plane (exact), so the walls need no edge or corner cases.
-                let slope = half_width / height;
-                let scale = 1.0 / (1.0 + slope * slope).sqrt();
                 let d = p - apex;
-                let mut best = (f64::INFINITY, Vec3::y());
-                for (axis, sign) in [(0, 1.0), (0, -1.0), (2, 1.0), (2, -1.0)] {
-                    let dist = (slope * d.y - sign * d[axis]) * scale;
-                    if dist < best.0 {
-                        let mut normal = Vec3::new(0.0, slope * scale, 0.0);
-                        normal[axis] = -sign * scale;
-                        best = (dist, normal);
-                    }
-                }
+                let best = pit_walls(&d, half_width / height)
+                    .into_iter()
+                    .min_by(|a, b| a.0.total_cmp(&b.0))
+                    .expect("four walls");
                 let above_rim = d.y - height;
                 if best.0 >= above_rim {
                     best
@@ -126,6 +119,33 @@ impl Shape {
                 .map(|s| s.distance(p))
                 .min_by(|a, b| a.0.total_cmp(&b.0))
                 .unwrap_or((f64::INFINITY, Vec3::y())),
+        }
+    }
+
+    /// Calls `found(distance, normal)` for each surface patch of the solid within `reach` of
+    /// `p`: the nearest one for smooth or convex shapes, and every wall within reach inside a
+    /// pyramid pit, whose edges and apex are concave: a node there touches two or more walls
+    /// at once, and one contact for the nearest wall would let it sink into the next.
+    pub fn for_each_contact(&self, p: &Vec3, reach: f64, mut found: impl FnMut(f64, Vec3)) {
+        if let Shape::PyramidPit {
+            apex,
+            half_width,
+            height,
+        } = self
+        {
+            let d = p - apex;
+            if d.y < *height {
+                for (dist, normal) in pit_walls(&d, half_width / height) {
+                    if dist < reach {
+                        found(dist, normal);
+                    }
+                }
+                return;
+            }
+        }
+        let (dist, normal) = self.distance(p);
+        if dist < reach {
+            found(dist, normal);
         }
     }
 
@@ -261,6 +281,17 @@ impl Shape {
     }
 }
 
+/// Signed distances and inward unit normals of a pyramid pit's four wall planes at `d` (the
+/// point relative to the apex); walls rise `slope` horizontally per unit of height.
+fn pit_walls(d: &Vec3, slope: f64) -> [(f64, Vec3); 4] {
+    let scale = 1.0 / (1.0 + slope * slope).sqrt();
+    [(0, 1.0), (0, -1.0), (2, 1.0), (2, -1.0)].map(|(axis, sign): (usize, f64)| {
+        let mut normal = Vec3::new(0.0, slope * scale, 0.0);
+        normal[axis] = -sign * scale;
+        ((slope * d.y - sign * d[axis]) * scale, normal)
+    })
+}
+
 /// `(|v|, v / |v|)`, with an arbitrary fixed direction (+y) at the degenerate point.
 fn length_and_direction(v: Vec3) -> (f64, Vec3) {
     let len = v.norm();
@@ -360,6 +391,17 @@ mod tests {
             pit.distance(&Vec3::new(1.5, -1.0, 0.0)).0 < 0.0,
             "in the pit's wall"
         );
+        // Near an edge of the pit (x = z) two walls are within reach, on the axis only one.
+        let mut walls = Vec::new();
+        pit.for_each_contact(&Vec3::new(0.9, -1.0, 0.9), 0.1, |d, n| walls.push((d, n)));
+        assert_eq!(walls.len(), 2, "{walls:?}");
+        assert!(
+            walls[0].1.x < 0.0 && walls[1].1.z < 0.0,
+            "inward normals: {walls:?}"
+        );
+        let mut count = 0;
+        pit.for_each_contact(&Vec3::new(0.9, -1.0, 0.0), 0.1, |_, _| count += 1);
+        assert_eq!(count, 1);
         assert!(
             pit.distance(&Vec3::new(5.0, 0.5, 0.0)).0 > 0.0,
             "above the rim"
