@@ -11,6 +11,7 @@ The simulator is projective-dynamics cloth after DiffCloth (Li et al. 2022). Sta
 
 from diffcloth_gym.errors import (
     ConfigError,
+    ConvergenceWarning,
     DiffClothError,
     DivergedError,
     InputError,
@@ -25,6 +26,7 @@ from diffcloth_gym.simulator import CONFIG_DIR, Simulator
 __all__ = [
     "CONFIG_DIR",
     "ConfigError",
+    "ConvergenceWarning",
     "DiffClothError",
     "DivergedError",
     "InputError",

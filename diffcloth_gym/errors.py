@@ -39,3 +39,10 @@ class UnsupportedError(DiffClothError, NotImplementedError):
 
 class InternalError(DiffClothError, RuntimeError):
     """A bug inside the simulator (a Rust panic caught at the boundary). Please report it."""
+
+
+class ConvergenceWarning(UserWarning):
+    """A step stopped at its iteration cap above its tolerance (``solver.tolerance > 0``): the
+    state is not the implicit-Euler solution, and with contact the contact law (and the
+    non-penetration it implies) holds only approximately. Raise ``solver.max_iterations``, or
+    see ``profile()["unconverged_steps"]``."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 import tomllib
 from pathlib import Path
 from typing import Any, Mapping
@@ -10,7 +11,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from diffcloth_gym import _core
-from diffcloth_gym.errors import ConfigError, InputError
+from diffcloth_gym.errors import ConfigError, ConvergenceWarning, InputError
 
 #: Folder of the scene configs shipped with the project.
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
@@ -98,7 +99,13 @@ class Simulator:
         targets = None if attachment_targets is None else _nodes("attachment_targets", attachment_targets, k)
         forces = None if external_forces is None else _nodes("external_forces", external_forces, self.num_nodes)
         self._tape_version += 1
-        return self._core.step(targets, forces, steps)
+        before = self._core.profile()["unconverged_steps"]
+        stats = self._core.step(targets, forces, steps)
+        missed = self._core.profile()["unconverged_steps"] - before
+        if missed and self._core.solver()["tolerance"] > 0:
+            warnings.warn(f"{int(missed)} step(s) stopped at the iteration cap above the tolerance (last: residual "
+                          f"{stats['residual']:.1e} after {stats['iterations']} iterations)", ConvergenceWarning, stacklevel=2)
+        return stats
 
     @property
     def positions(self) -> np.ndarray:

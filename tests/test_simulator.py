@@ -2,6 +2,7 @@
 
 import copy
 import threading
+import warnings
 
 import numpy as np
 import pytest
@@ -168,3 +169,14 @@ def test_trace_has_one_row_per_iteration_and_energy_never_rises(small):
     small.set_trace(False)
     small.step()
     assert small.trace().shape == (0, 2)
+
+
+def test_a_step_stopped_at_the_cap_warns_unless_the_count_is_fixed():
+    sim = Simulator.from_config("wind")
+    sim.set_solver(max_iterations=2, tolerance=1e-12)
+    with pytest.warns(diffcloth_gym.ConvergenceWarning, match="iteration cap"):
+        sim.step(steps=3)
+    sim.set_solver(tolerance=0.0)  # a fixed iteration count: nothing to warn about
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sim.step()
