@@ -41,6 +41,9 @@ def test_forward_error_falls_with_tolerance_and_anderson_saves_iterations(rows):
         plain, aa = (by(fwd, acceleration=a, sweep="tolerance", tolerance=tol)[0] for a in ("none", "anderson"))
         assert aa["iters_per_step"] < plain["iters_per_step"], tol
     assert by(fwd, sweep="reference")[0]["unconverged_pct"] == 0
+    # A run 10x tighter than the reference agrees with it better than any swept setting.
+    floor = by(fwd, sweep="reference_check")[0]["traj_rel_err"]
+    assert floor < min(r["traj_rel_err"] for r in fwd if r["sweep"] == "tolerance")
     # Tolerance 0: every step runs exactly its cap.
     for r in by(fwd, sweep="cap"):
         assert r["iters_per_step"] == r["max_iterations"]
