@@ -900,7 +900,8 @@ def write_report(rows: list[dict], meta_block: dict, out_dir: Path, notes: str =
     json_path, md_path = out_dir / f"{NAME}.json", out_dir / f"{NAME}.md"
     json_path.write_text(json.dumps({"meta": meta_block, "rows": rows}, indent=1, default=_json_default) + "\n")
     md = ["# Accuracy vs time", "",
-          f"`{meta_block['command']}` — {meta_block['date']}, {meta_block['cpu']}, git {meta_block['git']}", ""]
+          f"`{meta_block['command']}` — {meta_block['date']}, {meta_block['cpu']}, git {meta_block['git']}"
+          + (f", {meta_block['seconds'] / 60:.1f} min" if "seconds" in meta_block else ""), ""]
     for part, pm in meta_block.get("parts", {}).items():
         if pm.get("date") != meta_block["date"]:
             md.append(f"- part `{part}` from an earlier run: `{pm['command']}` — {pm['date']}, git {pm['git']}")
