@@ -26,6 +26,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from diffcloth_gym import Simulator  # noqa: E402
 from diffcloth_gym.bench import results  # noqa: E402
+from diffcloth_gym.bench.scene_utils import contact_free  # noqa: E402
 from diffcloth_gym.simulator import CONFIG_DIR  # noqa: E402
 
 
@@ -40,10 +41,7 @@ def scenes(quick):
             cfg = copy.deepcopy(load(name))
             cfg["mesh"].update(rows=res, cols=res)
             out.append((f"{name}{res}x{res}", cfg, "every"))
-    hat = load("hat")
-    hat["effects"] = [e for e in hat["effects"] if e not in ("obstacle_contact", "friction", "self_collision")]
-    for key in ("obstacles", "self_collision", "contact"):
-        hat.pop(key, None)
+    hat = contact_free(load("hat"))
     out += [("hat_nocontact", hat, "last"), ("hat_nocontact", hat, "every")]
     return out
 

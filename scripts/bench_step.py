@@ -37,6 +37,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from diffcloth_gym import Simulator  # noqa: E402
 from diffcloth_gym.bench import results  # noqa: E402
+from diffcloth_gym.bench.scene_utils import contact_free, trajectory_error  # noqa: E402
 from diffcloth_gym.simulator import CONFIG_DIR  # noqa: E402
 
 
@@ -57,10 +58,7 @@ def scene_configs(args) -> list[tuple[str, dict]]:
         out.append((f"wind{res}x{res}", cfg))
     # The forward suite times the core solver: the hat hanging from its handles, contact off
     # (the contact suite runs the full scene with the head and self-collision).
-    hat["effects"] = [e for e in hat["effects"] if e not in ("obstacle_contact", "friction", "self_collision")]
-    for key in ("obstacles", "self_collision", "contact"):
-        hat.pop(key, None)
-    out.append(("hat_nocontact", hat))
+    out.append(("hat_nocontact", contact_free(hat)))
     return out
 
 
@@ -75,10 +73,6 @@ def rollout(cfg: dict, steps: int, solver: dict, parallel: bool) -> tuple[np.nda
         unconverged += not stats["converged"]
         traj[n + 1] = sim.positions
     return traj, sim.profile(), unconverged
-
-
-def trajectory_error(traj: np.ndarray, ref: np.ndarray) -> float:
-    return float(np.linalg.norm(traj - ref) / max(np.linalg.norm(ref - ref[0]), 1e-300))
 
 
 def main() -> None:
