@@ -123,3 +123,16 @@ def test_iterative_solvers_match_direct_at_1e_8(scene):
         for key in ["v0", "x0"]:
             rel = np.linalg.norm(g[key] - ref[key]) / np.linalg.norm(ref[key])
             assert rel <= bound, (scene, solver, key, rel)
+
+
+@pytest.mark.parametrize("solver", ["fixed_point", "krylov"])
+def test_a_solve_that_falls_back_reports_the_iterations_it_spent(solver):
+    sim = Simulator.from_config("wind")
+    sim.set_recording(True)
+    sim.step(steps=3)
+    dl_dx = np.random.default_rng(0).normal(size=(3, sim.num_nodes, 3))
+    capped = sim.backward(dl_dx=dl_dx, solver=solver, tolerance=1e-14, max_iterations=2)
+    assert all(capped["fell_back"]) and capped["iterations"] == [2, 2, 2]
+    # The direct fallback still gives the direct gradient.
+    direct = sim.backward(dl_dx=dl_dx, solver="direct")
+    np.testing.assert_allclose(capped["v0"], direct["v0"], rtol=1e-8, atol=1e-12)

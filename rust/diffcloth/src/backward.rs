@@ -17,7 +17,7 @@ use crate::Vec3;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::matrix_free::bicgstab::{bicgstab, bicgstab_scratch, BicgParams};
 use faer::matrix_free::conjugate_gradient::{
-    conjugate_gradient, conjugate_gradient_scratch, CgParams,
+    conjugate_gradient, conjugate_gradient_scratch, CgError, CgParams,
 };
 use faer::matrix_free::{IdentityPrecond, InitialGuessStatus, LinOp, Precond};
 use faer::prelude::*;
@@ -62,11 +62,35 @@ impl Default for BackwardOptions {
 /// What the adjoint solve of one step did.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct AdjointStepStats {
+    /// Iterations of the iterative solver, also when it then fell back (the cap when a
+    /// Krylov solve stopped there).
     pub iterations: usize,
     /// The iterative solver stalled or diverged and the direct solve was used.
     pub fell_back: bool,
     /// Final relative residual.
     pub residual: f64,
+}
+
+/// How an iterative adjoint solve ended.
+#[derive(Debug, Clone, Copy)]
+struct Attempt {
+    iterations: usize,
+    converged: bool,
+}
+
+impl Attempt {
+    fn converged(iterations: usize) -> Self {
+        Self {
+            iterations,
+            converged: true,
+        }
+    }
+    fn failed(iterations: usize) -> Self {
+        Self {
+            iterations,
+            converged: false,
+        }
+    }
 }
 
 /// Time per backward stage (the columns of the paper's Table 1).
@@ -1008,7 +1032,11 @@ impl Simulator {
             AdjointSolver::FixedPoint => Some(self.fixed_point(op, g, z, options, scratch)),
             AdjointSolver::Krylov => Some(self.krylov(op, g, z, options, scratch)),
         };
-        if let Some(Some(iterations)) = iterative {
+        if let Some(Attempt {
+            iterations,
+            converged: true,
+        }) = iterative
+        {
             let residual = residual_of(z);
             if residual <= options.tolerance * 10.0
                 && z.iter().all(|v| v.iter().all(|c| c.is_finite()))
@@ -1022,10 +1050,7 @@ impl Simulator {
         }
         self.direct(op, g, z)?;
         Ok(AdjointStepStats {
-            iterations: match iterative {
-                Some(Some(i)) => i,
-                _ => 0,
-            },
+            iterations: iterative.map_or(0, |a| a.iterations),
             fell_back: iterative.is_some(),
             residual: residual_of(z),
         })
@@ -1043,7 +1068,7 @@ impl Simulator {
         z: &mut [Vec3],
         options: &BackwardOptions,
         scratch: &mut MemBuffer,
-    ) -> Option<usize> {
+    ) -> Attempt {
         let n = g.len();
         let g_norm = norm(g);
         let mut rhs = g.to_vec();
@@ -1064,14 +1089,14 @@ impl Simulator {
                 .sqrt()
                 / g_norm;
             if !residual.is_finite() {
-                return None;
+                return Attempt::failed(it);
             }
             if residual <= options.tolerance {
-                return Some(it);
+                return Attempt::converged(it);
             }
             growing = if residual > previous { growing + 1 } else { 0 };
             if growing >= 5 || it == options.max_iterations {
-                return None;
+                return Attempt::failed(it);
             }
             previous = residual;
             self.factor().mul_xyz(z, &mut pz);
@@ -1081,7 +1106,7 @@ impl Simulator {
             self.factor().solve_nodes(&mut rhs, MemStack::new(scratch));
             z.copy_from_slice(&rhs);
         }
-        None
+        Attempt::failed(options.max_iterations)
     }
 
     fn krylov(
@@ -1091,7 +1116,7 @@ impl Simulator {
         z: &mut [Vec3],
         options: &BackwardOptions,
         scratch: &mut MemBuffer,
-    ) -> Option<usize> {
+    ) -> Attempt {
         let n = g.len();
         let rhs = nodes_to_col(g);
         // Warm start from the previous (later) steps' adjoints: consecutive adjoints are close.
@@ -1120,9 +1145,14 @@ impl Simulator {
                 Par::Seq,
                 MemStack::new(scratch),
             );
-            if let Ok(info) = result {
-                col_to_nodes(&cg_out, z);
-                return Some(info.iter_count);
+            match result {
+                Ok(info) => {
+                    col_to_nodes(&cg_out, z);
+                    return Attempt::converged(info.iter_count);
+                }
+                Err(CgError::NoConvergence { .. }) => return Attempt::failed(cg.max_iters),
+                // Indefinite (possible away from a converged step): BiCGStab takes over.
+                Err(_) => {}
             }
         }
         let mut params = BicgParams::<f64>::default();
@@ -1146,7 +1176,10 @@ impl Simulator {
             MemStack::new(scratch),
         );
         col_to_nodes(&out, z);
-        result.ok().map(|info| info.iter_count)
+        match result {
+            Ok(info) => Attempt::converged(info.iter_count),
+            Err(_) => Attempt::failed(params.max_iters),
+        }
     }
 
     fn direct(&self, op: &AdjointOperator<'_>, g: &[Vec3], z: &mut [Vec3]) -> Result<()> {
