@@ -178,7 +178,7 @@ class Simulator:
 
     def solver(self) -> dict:
         """Accuracy knobs: max_iterations, tolerance, record_tolerance (for steps recorded for
-        backward, default 1e-10), acceleration, history, parallel."""
+        backward, default 1e-11), acceleration, history, parallel."""
         return self._core.solver()
 
     def set_solver(self, **settings: Any) -> None:

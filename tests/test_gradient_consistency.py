@@ -2,7 +2,7 @@
 
 The adjoint linearizes each step at its end state; the reference implementation at its default
 tolerance is 1e10 times off on the Hat (DESIGN.md section 3). Ours must be right without any
-clipping: recorded steps converge to solver.record_tolerance (default 1e-10).
+clipping: recorded steps converge to solver.record_tolerance (default 1e-11).
 """
 
 import tomllib

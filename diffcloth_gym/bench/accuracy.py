@@ -143,6 +143,11 @@ def garment_scene(name: str, steps: int, contact: bool = False, drive: Any = GAR
     return Scene(label, cfg if contact else contact_free(cfg), steps, drive)
 
 
+def default_record_tolerance() -> float:
+    """The simulator's default ``solver.record_tolerance`` (the polish of recorded steps)."""
+    return Simulator.from_config("napkin").solver()["record_tolerance"]
+
+
 def make_sim(cfg: dict, **solver: Any) -> Simulator:
     """A single-threaded simulator (the study compares algorithms, not thread counts)."""
     sim = Simulator.from_config(cfg)
@@ -316,7 +321,7 @@ def plot_forward(rows: list[dict], out_dir: Path) -> list[str]:
 # -- part 2: backward (Table 1) -------------------------------------------------------------
 def record_for_backward(scene: Scene) -> tuple[Simulator, np.ndarray]:
     """Records a rollout at the default forward settings (Anderson 1e-8, recorded steps polished
-    to 1e-10) from seeded random velocities, and a controller-style loss: seeded random linear
+    to the default record_tolerance) from seeded random velocities, and a controller-style loss: seeded random linear
     weights on the positions of every step (as scripts/bench_backward.py)."""
     sim = make_sim(scene.config)
     sim.set_recording(True)
@@ -475,7 +480,7 @@ def plot_backward(rows: list[dict], out_dir: Path) -> list[str]:
 def gradient_settings(full: bool) -> list[tuple[str, dict]]:
     """(label, set_solver kwargs) of the gradient part. Without polish the recorded steps stop
     where an unrecorded step would (record_tolerance = tolerance, same cap); with polish they
-    converge to 1e-10 whatever the tolerance (so all polished rows share one trajectory: two
+    converge to the default record_tolerance whatever the tolerance (so all polished rows share one trajectory: two
     tolerances are run to show it). Caps have no polished variant: tolerance 0 would make the
     recorded steps run to record_max_iterations."""
     def loose(accel: str, tol: float, cap: int) -> dict:
@@ -488,8 +493,9 @@ def gradient_settings(full: bool) -> list[tuple[str, dict]]:
     if full:
         # Plain PD without polish: the reference C++ code's algorithm and regime.
         out += [(f"plain {t:.0e}, no polish", loose("none", t, 2000)) for t in (1e-6, 1e-8)]
-    out += [(f"AA {t:.0e}, polish 1e-10", dict(acceleration="anderson", tolerance=t, max_iterations=300,
-                                               record_tolerance=1e-10, record_max_iterations=2000)) for t in ((1e-4, 1e-8) if full else (1e-8,))]
+    rt = default_record_tolerance()
+    out += [(f"AA {t:.0e}, polish {rt:.0e}", dict(acceleration="anderson", tolerance=t, max_iterations=300,
+                                                  record_tolerance=rt, record_max_iterations=2000)) for t in ((1e-4, 1e-8) if full else (1e-8,))]
     return out
 
 
@@ -808,7 +814,7 @@ def forward_section(rows: list[dict]) -> list[str]:
 
 def backward_section(rows: list[dict]) -> list[str]:
     out = ["## 2. Backward: paper Table 1 with our numbers", "",
-           "One recorded rollout per scene at the default forward settings (Anderson 1e-8, recorded steps to 1e-10; seeded "
+           f"One recorded rollout per scene at the default forward settings (Anderson 1e-8, recorded steps to {default_record_tolerance():.0e}; seeded "
            "random initial velocities, sigma 0.1 m/s), a controller-style loss (random linear weights on every step's "
            f"positions), adjoint iteration cap {BACKWARD_MAX_ITERATIONS}. `ms/step` = the backward's stage profile summed "
            "(inside Rust); speedup = direct ms / ms in the same run; fail % = steps whose iterative solve stalled, diverged "
@@ -834,13 +840,13 @@ def gradient_section(rows: list[dict]) -> list[str]:
            "Rollout from seeded random velocities (sigma 0.2 m/s) with the effectors moving (0, -0.003, 0.002) m per step "
            "and a smooth-L1 loss to a target shape on every step (as tests/test_gradient_consistency.py); gradients by the "
            "direct (LU) backward, compared with the gradient of a trajectory converged to 1e-12. `no polish`: recorded "
-           "steps stop where unrecorded ones would (record_tolerance = tolerance, same cap); `polish 1e-10`: the default, "
-           "recorded steps converge to 1e-10 (so the polished trajectory does not depend on the tolerance). `fwd ms/step` "
+           "steps stop where unrecorded ones would (record_tolerance = tolerance, same cap); `polish`: the default, "
+           f"recorded steps converge to {default_record_tolerance():.0e} (so the polished trajectory does not depend on the tolerance). `fwd ms/step` "
            "is measured while recording, polish included (iterations/step is the noise-free cost). `warned` = the "
            "backward's `warnings` was non-empty.", "",
            "Reading: without polish the error is not monotone in the tolerance: the adjoint linearizes each step at an "
            "unconverged state (where M + h^2 Hess W need not be positive definite) and 400 steps compound it, most where the "
-           "rollout is sensitive (see part 1). With polish every tolerance records the same 1e-10 trajectory; its remaining "
+           f"rollout is sensitive (see part 1). With polish every tolerance records the same {default_record_tolerance():.0e} trajectory; its remaining "
            "error against 1e-12 is the scene's own sensitivity to the per-step residual.", ""]
     hat = next((s for s in dict.fromkeys(r["scene"] for r in rows) if s.startswith("hat")), None)
     if hat:
@@ -860,7 +866,7 @@ def gradient_section(rows: list[dict]) -> list[str]:
             cpp.append({"tolerance": tol, "reference C++ (plain PD, no polish)": cpp_err,
                         "ours plain, no polish": err(lambda r: r["acceleration"] == "none" and r["tolerance"] == tol and not r["polish"]),
                         "ours AA, no polish": err(lambda r: r["acceleration"] == "anderson" and r["tolerance"] == tol and not r["polish"]),
-                        "ours AA, polish 1e-10": err(lambda r: r["tolerance"] == tol and r["polish"])})
+                        f"ours AA, polish {default_record_tolerance():.0e}": err(lambda r: r["tolerance"] == tol and r["polish"])})
         out += [f"### {hat}: dL/dv0 relative error beside the reference C++ code's (400 steps, exact LU, no clipping; its gradients "
                 "are only usable clipped)", "", table(cpp, list(cpp[0].keys())), ""]
     cols = ["scene", "steps", "setting", "fwd_ms_per_step", "iters_per_step", "polish_iters_per_step", "unconverged_pct", "v0_rel_err",
