@@ -358,19 +358,21 @@ def momentum_balance_error(sim: Simulator, p_before: np.ndarray) -> float:
 
 def contact_law(sim: Simulator, x_before: np.ndarray) -> dict[str, float]:
     """The last step's contacts against the Coulomb law: ``cone`` = worst ``(|J_T| - mu J_n)``
-    relative to the largest normal impulse (<= 0 inside the cone), ``stick_speed`` = worst
-    tangential speed of a node sticking to a static obstacle (the law says 0), ``stick`` and
-    ``active`` counts."""
+    over all contacts relative to the largest normal impulse (<= 0 inside the cone),
+    ``stick_speed`` = worst tangential speed of a node sticking to a static obstacle (the law
+    says 0), and the counts of ``stick`` and ``active`` obstacle contacts."""
     c = sim.contacts()
-    out = {"cone": -math.inf, "stick_speed": 0.0, "stick": 0, "active": int(np.count_nonzero(c["branch"] != 0))}
-    if out["active"] == 0:
+    on_obstacle = c["obstacle"] >= 0
+    out = {"cone": -math.inf, "stick_speed": 0.0,
+           "stick": int(np.count_nonzero((c["branch"] == 1) & on_obstacle)),
+           "active": int(np.count_nonzero((c["branch"] != 0) & on_obstacle))}
+    if not np.any(c["branch"] != 0):
         return out
     n, j = c["normal"], c["impulse"]
     jn = np.einsum("ij,ij->i", j, n)
     jt = np.linalg.norm(j - jn[:, None] * n, axis=1)
     out["cone"] = float(np.max(jt - c["mu"] * jn) / np.abs(jn).max())
-    stick = (c["branch"] == 1) & (c["obstacle"] >= 0)
-    out["stick"] = int(np.count_nonzero(c["branch"] == 1))
+    stick = (c["branch"] == 1) & on_obstacle
     if stick.any():
         nodes = c["node_a"][stick]
         v = (sim.positions[nodes] - x_before[nodes]) / sim.params()["h"]
@@ -611,66 +613,79 @@ def case_soft_hanging(size: str, workdir: Path) -> dict:
 
 
 def case_fast_end_effectors(size: str, workdir: Path) -> dict:
-    """A 1 m napkin (k_stretch 1e4, strain limits [0.95, 1.05]) held at its four corners. The
-    end effectors jump 0.5 m per step: 20 steps of random rigid moves, then 10 steps in which each
-    corner jumps 0.5 m on its own (crumpling and overstretching the cloth), then a hold; then the
-    corners are pulled apart in 2 steps until the cloth is uniformly at its strain limit
-    (corner distances x 1.05) and held. Forced (no energy bound). During the jumps the stretch
-    is only required to stay finite (inertia makes it large, reported as ``fast_max_stretch``);
-    after the pull all stretches must lie within the limits +- 0.01 (the sag under gravity adds
-    ~0.006 at the corners), the cloth must be at its limit (min stretch >= 1.05 - 0.01) and the
-    corners at their targets. Backward through the whole motion (loss on the final state)."""
+    """A 1 m napkin (k_stretch 1e4, strain limits [0.95, 1.05], no gravity: the end effectors
+    are the only load) held at its four corners. First the corners are pulled apart within 2
+    steps until the cloth is uniformly at its strain limit (corner distances x 1.05) and held:
+    all stretches must then lie within the limits +- 1e-3 and the cloth must be at its limit (min
+    stretch >= 1.05 - 1e-3). (With gravity the corner triangles carry the sag as a point load:
+    their stretch exceeds the limit by an amount that grows with mesh refinement.) Then the end effectors jump 0.5 m per step: 20 steps of random rigid
+    moves of the stretched shape, 10 steps in which each corner jumps 0.5 m on its own, and a
+    hold. Forced (no energy bound); states must stay finite (the stretch during the jumps is
+    reported as ``fast_max_stretch``: PD strain limiting is a penalty and inertia wins at
+    50 m/s) and the corners must end at their targets. (The strain check is not repeated after
+    the jumps: they can leave a fold in the free edges that tension along the edge cannot
+    undo, a stable state.) Backward through the whole motion (loss on the final state)."""
     rows = pick(size, 10, 20)
     hold = pick(size, 100, 300)
     limits = (0.95, 1.05)
-    sim = Simulator.from_config(napkin(rows, k_stretch=1e4, strain_limits=limits, effects=("attachments",),
-                                       attachments={"nodes": corners(rows)}))
+    cfg = napkin(rows, k_stretch=1e4, strain_limits=limits, effects=("attachments",), attachments={"nodes": corners(rows)})
+    cfg["effects"].remove("gravity")  # the end effectors are the only load: a uniform stretch is the equilibrium
+    sim = Simulator.from_config(cfg)
     rng = np.random.default_rng(5)
     rest = sim.attachment_targets.copy()
     centre = rest.mean(axis=0)
+    stretched = centre + limits[1] * (rest - centre)
 
     def unit(k: int) -> np.ndarray:
         d = rng.normal(size=(k, 3))
         return d / np.linalg.norm(d, axis=1, keepdims=True)
 
-    path: list[np.ndarray] = []
+    path = [centre + (1 + 0.025 * k) * (rest - centre) for k in (1, 2)] + [stretched] * hold
+    pulled = len(path)
     offset = np.zeros(3)
     for _ in range(20):  # rigid jumps of 0.5 m
         offset = offset + 0.5 * unit(1)[0]
-        path.append(rest + offset)
+        path.append(stretched + offset)
     jitter = np.zeros((4, 3))
     for _ in range(10):  # every corner jumps 0.5 m on its own
         jitter = jitter + 0.5 * unit(4)
-        path.append(rest + offset + jitter)
-    path += [rest + offset] * 50
-    fast_steps = len(path)
-    path += [centre + offset + (1 + 0.025 * k) * (rest - centre) for k in (1, 2)]
-    path += [centre + offset + (1 + 0.05) * (rest - centre)] * hold
+        path.append(stretched + offset + jitter)
+    fast_end = len(path)
+    path += [stretched + offset] * hold
     mon = Monitor(energy=False)
     sim.set_recording(True)
-    fast_max = []
-    dl_dx = run(sim, mon, len(path), targets=lambda k: path[k],
-                loss_grad=lambda s: np.zeros((s.num_nodes, 3)),
-                after_step=lambda k: fast_max.append(float(sim.principal_stretches().max())) if k < fast_steps else None)
-    s = sim.principal_stretches()
-    tol = 0.01
+    seen: dict[str, Any] = {"fast_max": -math.inf}
+
+    def observe(k: int) -> None:
+        if k == pulled - 1:
+            seen["pulled"] = sim.principal_stretches()
+        elif pulled <= k < fast_end:
+            seen["fast_max"] = max(seen["fast_max"], float(sim.principal_stretches().max()))
+
+    dl_dx = run(sim, mon, len(path), targets=lambda k: path[k], loss_grad=lambda s: np.zeros((s.num_nodes, 3)),
+                after_step=observe)
     if dl_dx is not None:
         dl_dx[-1] = (sim.positions - sim.positions.mean(axis=0)) / sim.num_nodes  # loss: spread at the end
     backward(sim, mon, dl_dx)
+    s = seen.get("pulled", np.array([math.nan]))
+    tol = 1e-3
     corner_err = float(np.linalg.norm(sim.positions[sim.attachment_nodes] - path[-1], axis=1).max())
+    final = sim.principal_stretches()
     return finish(mon, {
         "within_strain_limits": (limits[0] - tol <= s.min() and s.max() <= limits[1] + tol,
-                                 f"final stretches [{s.min():.4f}, {s.max():.4f}] within [{limits[0]}, {limits[1]}] +- {tol}"),
-        "at_strain_limit": (s.min() >= limits[1] - tol, f"min final stretch {s.min():.4f} >= {limits[1] - tol} (pulled to the limit)"),
-        "corners_follow": (corner_err <= 0.01, f"corner-to-target distance {corner_err:.2e} m (bound 0.01)"),
-    }, None, fast_max_stretch=max(fast_max, default=None))
+                                 f"stretches after the pull [{s.min():.6f}, {s.max():.6f}] within [{limits[0]}, {limits[1]}] +- {tol:g}"),
+        "at_strain_limit": (s.min() >= limits[1] - tol, f"min stretch after the pull {s.min():.6f} >= {limits[1] - tol:g}"),
+        "corners_follow": (corner_err <= 0.01, f"corner-to-target distance after the jumps {corner_err:.2e} m (bound 0.01)"),
+    }, None, stretch_bounds=(limits[0] - tol, limits[1] + tol), fast_max_stretch=seen["fast_max"],
+        final_stretch_range=[float(final.min()), float(final.max())])
 
 
 def case_sphere_friction(size: str, workdir: Path, mu: float) -> dict:
     """``sphere.toml`` (h = 1/180 s) with friction mu = 0 or 2, forward and backward (loss: mean
     height on every step). Every impulse must lie in the Coulomb cone (mu = 0: purely normal),
-    nodes sticking to the sphere must not move tangentially (< 1e-4 m/s); mu = 0 never sticks,
-    mu = 2 holds the draped cloth: >= 90 % of the active contacts stick over the last fifth."""
+    nodes sticking to the sphere must not move tangentially (< 1e-4 m/s); mu = 0 never sticks to
+    the sphere, mu = 2 holds the draped cloth: >= 90 % of the active sphere contacts stick over
+    the last fifth of the run. (Self-contacts keep the scene's mu 0.1.)"""
     rows = pick(size, 15, 25)
     steps = pick(size, 540, 1080)
     sim = Simulator.from_config(sphere_config(mu, rows))
@@ -698,9 +713,9 @@ def case_sphere_friction(size: str, workdir: Path, mu: float) -> dict:
     }
     if mu == 0:
         total = sum(w["stick"] for w in laws)
-        checks["never_sticks"] = (total == 0, f"{total} sticking contacts (frictionless: 0)")
+        checks["never_sticks"] = (total == 0, f"{total} contacts sticking to the sphere (frictionless: 0)")
     else:
-        checks["holds_draped_cloth"] = (fraction >= 0.9, f"{fraction:.0%} of active contacts stick over the last fifth (bound 90 %)")
+        checks["holds_draped_cloth"] = (fraction >= 0.9, f"{fraction:.0%} of active sphere contacts stick over the last fifth (bound 90 %)")
     return finish(mon, checks, ENERGY_BOUND, mu=mu, stick_fraction_tail=fraction)
 
 
@@ -1002,7 +1017,8 @@ ISSUES: dict[str, tuple[str, str]] = {
         "The contact-coupled PD iteration stalls (k_stretch 1e5, h 1/30: 300 iterations end at residual 1e-7..1e-4; "
         "20000 plain iterations still leave 0.3 mm) and the contact law holds only at the fixed point. Reproducer: "
         "sim = Simulator.from_config(sphere_config(0.3, 15, h=1/30, k_stretch=1e5)); sim.step(steps=12) -> "
-        "sim.obstacle_distance(0).min() = -0.156 m (thickness 0.02); E 254 -> 390 J two steps later."),
+        "sim.obstacle_distance(0).min() = -0.156 m (thickness 0.02, step not converged); E 230 -> 304 J in the next "
+        "3 steps."),
     "singular_loop": (
         "backward() SolverError: coupled contact linearization singular for a loop of sticking contacts",
         "Two nodes each sticking to an obstacle and to each other are redundant constraints; the adjoint's dense "
@@ -1013,7 +1029,7 @@ ISSUES: dict[str, tuple[str, str]] = {
         "PyramidPit::distance reports only the nearest wall, so a node near an edge of the pit moves into the other "
         "wall (up to 1.3 mm of the 5 mm layer), alternating walls from step to step. Reproducer: "
         "sim = Simulator.from_config('pyramid'); sim.step(steps=78) -> 0.005 - sim.obstacle_distance(0).min() = "
-        "1.34e-3 (node 494, at the pit edge x = -z)."),
+        "1.34e-3 (node 480, at the pit edge x = z)."),
     "sliver_bend": (
         "OBJ slivers below aspect ~1e-7 pass the loader but their bending weights inject energy",
         "The loader accepts triangles down to area 1e-12 x diag^2 (aspect ~1e-11); the cotangent bending weights of "
