@@ -20,3 +20,13 @@ SMALL_GRID = {
 @pytest.fixture
 def small():
     return Simulator.from_config(SMALL_GRID)
+
+
+def pytest_addoption(parser):
+    parser.addoption("--full", action="store_true", default=False,
+                     help="run tests/stability at the full (issue) sizes instead of the CI sizes (minutes)")
+
+
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers", "stability: hard-case numerical stability suite (tests/stability; --full for the full sizes)")
