@@ -1052,10 +1052,10 @@ CASES: dict[str, Case] = {c.name: c for c in [
     _case("sock_random", case_sock_random),
 ]}
 
-#: Simulator bugs the suite reveals: ``(case, check) -> (sizes where it fails, reason with a
-#: reproducer)``. The tests assert every other check and mark exactly these ``xfail(strict=True)``
-#: (so a fix shows up as an unexpected pass); check names are those of :func:`evaluate`.
-#: Simulator bugs the suite reveals: name -> (title, details with a reproducer).
+#: Simulator bugs the suite reveals and that are still open: name -> (title, details with a
+#: reproducer). Fixed since: singular redundant contact loops, pyramid-pit edges, OBJ slivers,
+#: contacts missed by detection from the entering velocity (late detection), and union
+#: obstacles giving one contact per node (nearest part only).
 ISSUES: dict[str, tuple[str, str]] = {
     "stiff_contact": (
         "contact PD stalls at stiff k_stretch h^2/m: nodes go through the obstacle, energy grows",
@@ -1064,21 +1064,6 @@ ISSUES: dict[str, tuple[str, str]] = {
         "sim = Simulator.from_config(sphere_config(0.3, 15, h=1/30, k_stretch=1e5)); sim.step(steps=12) -> "
         "sim.obstacle_distance(0).min() = -0.156 m (thickness 0.02, step not converged: a ConvergenceWarning since "
         "main 6dfd453); E 230 -> 304 J in the next 3 steps."),
-    "nearest_part_only": (
-        "a union obstacle gives a node one contact, with its nearest part: at a junction the node goes into the other",
-        "Shape::for_each_contact reports every wall of a pyramid_pit within reach (main 7a58dfc) but only the nearest "
-        "part of a union. Hat (head sphere + neck capsule): cfg, targets, _ = garment_setups('hat', 20)[3]; "
-        "sim = Simulator.from_config(cfg); sim.set_recording(True); 273 steps with attachment_targets=targets(k) -> "
-        "0.01 - sim.obstacle_distance(0).min() = 8.25e-3 (node 429: 15 mm from the sphere, its only contact, "
-        "1.7 mm from the capsule)."),
-    "late_detection": (
-        "contacts detected once per step from the entering velocity miss nodes that accelerate within the step",
-        "The candidate reach is thickness + margin + 2 h |v_entering|. In the Hat rollouts the hat snaps: a node "
-        "approaching the head at 0.37 m/s from 4 cm (reach 2.7 cm) moves 3.6 cm in one converged step with no "
-        "contact and ends 5.4 mm into the 10 mm layer; in placement 15 (after two unconverged 2000-iteration "
-        "steps launched a resting node at 3 m/s) a node ends 9.8 mm inside the head. Reproducer: cfg, targets, _ = "
-        "garment_setups('hat', 20)[19]; sim = Simulator.from_config(cfg); sim.set_recording(True); 86 steps with "
-        "attachment_targets=targets(k) -> 0.01 - sim.obstacle_distance(0).min() = 5.35e-3 (node 391)."),
 }
 
 #: Which case checks the :data:`ISSUES` break: ``(case, check) -> (sizes, issue)``. The tests
@@ -1091,8 +1076,6 @@ KNOWN_ISSUES: dict[tuple[str, str], tuple[tuple[str, ...], tuple[str, ...]]] = {
     ("large_step_sphere_h10", "penetration"): (SIZES, ("stiff_contact",)),
     ("large_step_sphere_h10", "thickness_layer"): (SIZES, ("stiff_contact",)),
     ("large_step_sphere_h10", "energy"): (SIZES, ("stiff_contact",)),
-    ("hat_random", "penetration"): (("full",), ("late_detection",)),
-    ("hat_random", "thickness_layer"): (("full",), ("late_detection", "nearest_part_only")),
 }
 
 

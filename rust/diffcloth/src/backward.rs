@@ -322,7 +322,9 @@ fn linearize_contacts(sim: &Simulator, rec: &StepRecord) -> Result<Vec<ContactLi
             ContactKind::Obstacle { node, obstacle } => {
                 let o = &sim.obstacles()[obstacle];
                 let (offset, _) = o.motion.at(rec.time);
-                let jac = o.shape.normal_jacobian(&(rec.x_prev[node] - offset));
+                let jac = o
+                    .shape
+                    .normal_jacobian_of(&(rec.x_prev[node] - offset), &c.normal);
                 (
                     vec![(node, 1.0)],
                     vec![(node, 1.0)],

@@ -97,6 +97,10 @@ pub struct Simulator {
     self_collision: Option<SelfCollision>,
     contact_settings: ContactSettings,
     contacts: ContactSet,
+    /// Scratch of the contact detection: velocities that set each node's reach, and which
+    /// nodes have a contact with the obstacle being checked.
+    detect_velocity: Vec<Vec3>,
+    covered: Vec<bool>,
     factor: SpdFactor,
     // State.
     x: Vec<Vec3>,
@@ -235,6 +239,8 @@ impl Simulator {
             self_collision,
             contact_settings,
             contacts: ContactSet::default(),
+            detect_velocity: Vec::with_capacity(n),
+            covered: Vec::with_capacity(n),
             factor: SpdFactor::new(1, &[(0, 0, 1.0)])?,
             x: mesh.positions.clone(),
             v: vec![Vec3::zeros(); n],
@@ -541,20 +547,18 @@ impl Simulator {
         self.prepare(input)?;
         self.record_inputs(&input);
         if self.effects.has_contact() {
-            let detect_start = Instant::now();
-            self.contacts.detect(
-                &self.x,
-                &self.v,
-                &self.mass,
-                self.time,
-                self.params.h,
-                &self.obstacles,
-                self.self_collision.as_mut(),
-                &self.contact_settings,
-            );
-            self.profile.detection += detect_start.elapsed();
+            self.detect_contacts(false);
         }
-        let stats = self.solve_pd();
+        let mut stats = self.solve_pd();
+        // Detection reaches as far as each node's entering velocity carries it. A node that
+        // speeds up within the step (a snap-through) can end inside an obstacle it was never
+        // a candidate for (the Hat: 3.6 cm in one step, 9.8 mm deep in the head); then detect
+        // again with the step's own motion and solve the step once more.
+        if self.effects.obstacle_contact && self.missed_obstacle_contact() {
+            self.profile.redetections += 1;
+            self.detect_contacts(true);
+            stats = self.solve_pd();
+        }
         // The PD result is in `mapped`.
         let h = self.params.h;
         if !self.mapped.iter().all(|p| p.iter().all(|c| c.is_finite())) {
@@ -610,6 +614,73 @@ impl Simulator {
             + (p.contact_solve - p0.contact_solve);
         p.other += total.saturating_sub(staged);
         Ok(stats)
+    }
+
+    /// Finds this step's contact candidates from the entering state; with `with_motion`, each
+    /// node's reach also covers the motion of the step just solved (in `mapped`).
+    fn detect_contacts(&mut self, with_motion: bool) {
+        let detect_start = Instant::now();
+        let h = self.params.h;
+        let mut velocity = std::mem::take(&mut self.detect_velocity);
+        velocity.clear();
+        velocity.extend(
+            self.v
+                .iter()
+                .zip(&self.x)
+                .zip(&self.mapped)
+                .map(|((v, x), xn)| {
+                    let moved = (xn - x) / h;
+                    if with_motion && moved.norm() > v.norm() {
+                        moved
+                    } else {
+                        *v
+                    }
+                }),
+        );
+        self.contacts.detect(
+            &self.x,
+            &velocity,
+            &self.mass,
+            self.time,
+            h,
+            &self.obstacles,
+            self.self_collision.as_mut(),
+            &self.contact_settings,
+        );
+        self.detect_velocity = velocity;
+        self.profile.detection += detect_start.elapsed();
+    }
+
+    /// Whether the solved step (`mapped`) put a node that has no contact with an obstacle
+    /// inside that obstacle's contact layer.
+    fn missed_obstacle_contact(&mut self) -> bool {
+        let detect_start = Instant::now();
+        let mut covered = std::mem::take(&mut self.covered);
+        let mut missed = false;
+        for (o, obstacle) in self.obstacles.iter().enumerate() {
+            covered.clear();
+            covered.resize(self.x.len(), false);
+            for c in &self.contacts.contacts {
+                if let crate::contact::ContactKind::Obstacle { node, obstacle } = c.kind {
+                    if obstacle == o {
+                        covered[node] = true;
+                    }
+                }
+            }
+            let (offset, _) = obstacle.motion.at(self.time + self.params.h);
+            let layer = self.contact_settings.thickness;
+            missed |= self
+                .mapped
+                .iter()
+                .zip(&covered)
+                .any(|(p, &c)| !c && obstacle.shape.distance(&(p - offset)).0 < layer);
+            if missed {
+                break;
+            }
+        }
+        self.covered = covered;
+        self.profile.detection += detect_start.elapsed();
+        missed
     }
 
     /// Checkpointed recording: the entering state at segment starts, and every step's inputs.

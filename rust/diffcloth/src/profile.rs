@@ -26,6 +26,8 @@ pub struct Profile {
     /// Numeric refactorizations of the system matrix (only when h, mass or stiffness change).
     pub refactorizations: u64,
     pub refactor: Duration,
+    /// Steps solved twice because a node ended inside an obstacle it had no contact with.
+    pub redetections: u64,
     /// Collision detection (obstacle queries and the self-collision spatial hash).
     pub detection: Duration,
     /// Per-iteration Signorini-Coulomb contact solves.
@@ -55,6 +57,7 @@ impl Profile {
             ("escape_steps", self.escape_steps as f64),
             ("polish_iterations", self.polish_iterations as f64),
             ("refactorizations", self.refactorizations as f64),
+            ("redetections", self.redetections as f64),
             ("local_s", self.local.as_secs_f64()),
             ("global_s", self.global.as_secs_f64()),
             ("refactor_s", self.refactor.as_secs_f64()),

@@ -127,6 +127,19 @@ impl Shape {
     /// pyramid pit, whose edges and apex are concave: a node there touches two or more walls
     /// at once, and one contact for the nearest wall would let it sink into the next.
     pub fn for_each_contact(&self, p: &Vec3, reach: f64, mut found: impl FnMut(f64, Vec3)) {
+        self.for_each_contact_dyn(p, reach, &mut found);
+    }
+
+    fn for_each_contact_dyn(&self, p: &Vec3, reach: f64, found: &mut dyn FnMut(f64, Vec3)) {
+        // A union: every part within reach (staying `reach` from the union means staying that
+        // far from each part; the nearest part alone let a node near the head-neck junction
+        // sink into the part it was not in contact with).
+        if let Shape::Union(parts) = self {
+            for part in parts {
+                part.for_each_contact_dyn(p, reach, found);
+            }
+            return;
+        }
         if let Shape::PyramidPit {
             apex,
             half_width,
@@ -146,6 +159,21 @@ impl Shape {
         let (dist, normal) = self.distance(p);
         if dist < reach {
             found(dist, normal);
+        }
+    }
+
+    /// [`Shape::normal_jacobian`] of the surface patch whose normal at `p` is `normal` (the
+    /// patch a contact was made with; unions and pits give one contact per patch).
+    pub fn normal_jacobian_of(&self, p: &Vec3, normal: &Vec3) -> Matrix3<f64> {
+        match self {
+            Shape::Union(parts) => parts
+                .iter()
+                .min_by(|a, b| {
+                    let miss = |s: &Shape| (s.distance(p).1 - normal).norm_squared();
+                    miss(a).total_cmp(&miss(b))
+                })
+                .map_or(Matrix3::zeros(), |s| s.normal_jacobian_of(p, normal)),
+            _ => self.normal_jacobian(p),
         }
     }
 
@@ -399,6 +427,39 @@ mod tests {
             walls[0].1.x < 0.0 && walls[1].1.z < 0.0,
             "inward normals: {walls:?}"
         );
+        // A union gives a contact per part within reach, each with its own curvature.
+        let head = Shape::Union(vec![
+            Shape::Sphere {
+                center: Vec3::zeros(),
+                radius: 2.0,
+            },
+            Shape::Capsule {
+                a: Vec3::new(0.0, -4.0, 0.0),
+                b: Vec3::new(0.0, -1.5, 0.0),
+                radius: 0.8,
+            },
+        ]);
+        let junction = Vec3::new(1.0, -1.85, 0.0);
+        let mut parts = Vec::new();
+        head.for_each_contact(&junction, 0.25, |d, n| parts.push((d, n)));
+        assert_eq!(parts.len(), 2, "{parts:?}");
+        for (_, n) in &parts {
+            let sphere = Shape::Sphere {
+                center: Vec3::zeros(),
+                radius: 2.0,
+            };
+            let expect = if (sphere.distance(&junction).1 - n).norm() < 1e-12 {
+                sphere.normal_jacobian(&junction)
+            } else {
+                Shape::Capsule {
+                    a: Vec3::new(0.0, -4.0, 0.0),
+                    b: Vec3::new(0.0, -1.5, 0.0),
+                    radius: 0.8,
+                }
+                .normal_jacobian(&junction)
+            };
+            assert!((head.normal_jacobian_of(&junction, n) - expect).norm() < 1e-15);
+        }
         let mut count = 0;
         pit.for_each_contact(&Vec3::new(0.9, -1.0, 0.0), 0.1, |_, _| count += 1);
         assert_eq!(count, 1);
