@@ -768,13 +768,10 @@ fn gradients_match_finite_differences_on_the_sock() {
     );
 }
 
-/// Nodes in two contacts at once: the bottom square rests on a sticky plane while the top one
-/// slides over it, so each bottom node has an obstacle contact and a self-contact pair, solved
-/// jointly (projected Gauss-Seidel) and linearized jointly in the adjoint.
-#[test]
-fn gradients_through_coupled_contacts_match_finite_differences() {
-    let (dir, obj) = two_squares_obj("coupled", 0.01, 0.072);
-    let mut sim = sim_from_toml(&format!(
+/// The squares of `obj` over a floor (friction `floor_mu`) with self-contact (radius 0.06,
+/// friction `self_mu`), gravity and external forces; fixed iteration count.
+fn squares_on_a_floor(obj: &std::path::Path, floor_mu: f64, self_mu: f64) -> Simulator {
+    sim_from_toml(&format!(
         r#"
 h = 0.01
 effects = ["gravity", "stretch", "obstacle_contact", "self_collision", "friction", "external_forces"]
@@ -785,11 +782,11 @@ path = "{}"
 density = 0.2
 k_stretch = 30.0
 [[obstacles]]
-mu = 1.0
+mu = {floor_mu}
 shape = {{ kind = "plane", point = [0.0, 0.0, 0.0], normal = [0.0, 1.0, 0.0] }}
 [self_collision]
 radius = 0.06
-mu = 0.1
+mu = {self_mu}
 [contact]
 thickness = 0.01
 margin = 0.01
@@ -798,7 +795,16 @@ tolerance = 0.0
 max_iterations = 300
 "#,
         obj.display()
-    ));
+    ))
+}
+
+/// Nodes in two contacts at once: the bottom square rests on a sticky plane while the top one
+/// slides over it, so each bottom node has an obstacle contact and a self-contact pair, solved
+/// jointly (projected Gauss-Seidel) and linearized jointly in the adjoint.
+#[test]
+fn gradients_through_coupled_contacts_match_finite_differences() {
+    let (dir, obj) = two_squares_obj("coupled", 0.01, 0.072);
+    let mut sim = squares_on_a_floor(&obj, 1.0, 0.1);
     let steps = 3;
     let n = sim.num_nodes();
     let v0: Vec<Vec3> = (0..n)
@@ -860,31 +866,7 @@ fn gradients_through_a_loop_of_sticking_contacts_match_finite_differences() {
         "loop",
         [Vec3::new(0.0, 0.01, 0.0), Vec3::new(0.36, 0.01, 0.0)],
     );
-    let mut sim = sim_from_toml(&format!(
-        r#"
-h = 0.01
-effects = ["gravity", "stretch", "obstacle_contact", "self_collision", "friction", "external_forces"]
-[mesh]
-kind = "obj"
-path = "{}"
-[material]
-density = 0.2
-k_stretch = 30.0
-[[obstacles]]
-mu = 0.0
-shape = {{ kind = "plane", point = [0.0, 0.0, 0.0], normal = [0.0, 1.0, 0.0] }}
-[self_collision]
-radius = 0.06
-mu = 5.0
-[contact]
-thickness = 0.01
-margin = 0.01
-[solver]
-tolerance = 0.0
-max_iterations = 300
-"#,
-        obj.display()
-    ));
+    let mut sim = squares_on_a_floor(&obj, 0.0, 5.0);
     let steps = 2;
     let n = sim.num_nodes();
     let v0: Vec<Vec3> = (0..n)
