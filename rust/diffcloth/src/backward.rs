@@ -148,6 +148,7 @@ pub const TRUSTED_FORWARD_RESIDUAL: f64 = 1e-9;
 
 /// The linearization of one step at its end state: per-constraint projection Jacobians.
 struct Linearization {
+    /// Per triangle: its weight times its projection Jacobian.
     stretch: Vec<[[f64; 6]; 6]>,
     /// Per bending constraint: its weight times its projection Jacobian.
     bend: Vec<Matrix3<f64>>,
@@ -171,6 +172,8 @@ impl Linearization {
             let (lo, hi) = s.strain_limits();
             for (t, j) in self.stretch.iter_mut().enumerate() {
                 *j = stretch_jacobian(&s.deformation_gradient(t, x), lo, hi);
+                let w = s.weight(t);
+                j.iter_mut().flatten().for_each(|e| *e *= w);
             }
         }
         if let Some(b) = sim.bend() {
@@ -183,25 +186,16 @@ impl Linearization {
     /// `out -= dP v`, constraint by constraint (never assembled for the iterative solvers).
     fn sub_dp(&self, sim: &Simulator, v: &[Vec3], out: &mut [Vec3]) {
         if let Some(s) = sim.stretch() {
-            for (t, tri) in s.triangles().iter().enumerate() {
-                let b = s.shape(t);
-                let mut df = [0.0; 6];
-                for l in 0..3 {
-                    for c in 0..3 {
-                        df[c] += v[tri[l]][c] * b[l][0];
-                        df[3 + c] += v[tri[l]][c] * b[l][1];
-                    }
-                }
-                let j = &self.stretch[t];
-                let mut q = [0.0; 6];
-                for (r, qr) in q.iter_mut().enumerate() {
-                    *qr = (0..6).map(|k| j[r][k] * df[k]).sum();
-                }
-                let w = s.weight(t);
-                for l in 0..3 {
-                    for c in 0..3 {
-                        out[tri[l]][c] -= w * (q[c] * b[l][0] + q[3 + c] * b[l][1]);
-                    }
+            for ((tri, b), j) in s.triangles().iter().zip(s.shapes()).zip(&self.stretch) {
+                // dF = [v] B (3x2, columns f0 and f1); q = (w J) vec(dF); out -= q B^T.
+                let [va, vb, vc] = tri.map(|k| v[k]);
+                let f0 = va * b[0][0] + vb * b[1][0] + vc * b[2][0];
+                let f1 = va * b[0][1] + vb * b[1][1] + vc * b[2][1];
+                let df = [f0.x, f0.y, f0.z, f1.x, f1.y, f1.z];
+                let q: [f64; 6] = std::array::from_fn(|r| (0..6).map(|k| j[r][k] * df[k]).sum());
+                let (q0, q1) = (Vec3::new(q[0], q[1], q[2]), Vec3::new(q[3], q[4], q[5]));
+                for (l, &k) in tri.iter().enumerate() {
+                    out[k] -= q0 * b[l][0] + q1 * b[l][1];
                 }
             }
         }
@@ -239,7 +233,7 @@ impl Linearization {
         }
         if let Some(s) = sim.stretch() {
             for (k, tri) in s.triangles().iter().enumerate() {
-                let (b, j, w) = (s.shape(k), &self.stretch[k], s.weight(k));
+                let (b, j) = (s.shape(k), &self.stretch[k]);
                 for l in 0..3 {
                     for m in 0..3 {
                         for c in 0..3 {
@@ -250,7 +244,7 @@ impl Linearization {
                                         val += b[l][kk] * j[c + 3 * kk][e + 3 * mm] * b[m][mm];
                                     }
                                 }
-                                t.push(Triplet::new(3 * tri[l] + c, 3 * tri[m] + e, -w * val));
+                                t.push(Triplet::new(3 * tri[l] + c, 3 * tri[m] + e, -val));
                             }
                         }
                     }

@@ -321,6 +321,10 @@ impl Stretch {
     pub fn shape(&self, t: usize) -> &[Vector2<f64>; 3] {
         &self.shape[t]
     }
+    /// Every triangle's [`Stretch::shape`].
+    pub fn shapes(&self) -> &[[Vector2<f64>; 3]] {
+        &self.shape
+    }
     pub fn weight(&self, t: usize) -> f64 {
         self.weight[t]
     }
