@@ -627,14 +627,19 @@ def plot_timestep(rows: list[dict], out_dir: Path) -> list[str]:
             b.plot([r["ms_total"] for r in rs], [r["rel_err"] for r in rs], "o" + ls, label=label)
     a.set(xscale="log", yscale="log", xlabel="time step h (s)", ylabel="error vs h_ref (relative L2, common times)")
     b.set(xscale="log", yscale="log", xlabel="forward time for the whole duration (ms, one thread)", ylabel="error")
-    for ax in (a, b):
+    return _save(fig, (a, b), out_dir, "accuracy_timestep.png")
+
+
+def _save(fig: Any, axes: Sequence[Any], out_dir: Path, name: str) -> list[str]:
+    """Grid, major-only labels and a legend on each axis; writes ``name`` and closes the figure."""
+    for ax in axes:
         ax.grid(True, which="both", alpha=0.3)
         _no_minor_labels(ax)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(out_dir / "accuracy_timestep.png", dpi=110)
-    plt.close(fig)
-    return ["accuracy_timestep.png"]
+    fig.savefig(out_dir / name, dpi=110)
+    _pyplot().close(fig)
+    return [name]
 
 
 def plot_gradient(rows: list[dict], out_dir: Path) -> list[str]:
@@ -649,13 +654,7 @@ def plot_gradient(rows: list[dict], out_dir: Path) -> list[str]:
                            label=f"{scene}" + (", polish" if polish else ", no polish"))
     ax.axhline(1e-2, color="k", ls="--", lw=1, label="1e-2")
     ax.set(xscale="log", yscale="log", xlabel="forward ms/step while recording (one thread)", ylabel="dL/dv0 error vs converged (relative L2)")
-    ax.grid(True, which="both", alpha=0.3)
-    _no_minor_labels(ax)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out_dir / "accuracy_gradient.png", dpi=110)
-    plt.close(fig)
-    return ["accuracy_gradient.png"]
+    return _save(fig, (ax,), out_dir, "accuracy_gradient.png")
 
 
 def _pyplot():

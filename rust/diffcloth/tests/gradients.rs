@@ -374,27 +374,28 @@ fn contact_free_garment(name: &str, iterations: usize) -> Simulator {
     Simulator::new(&cfg).unwrap()
 }
 
+/// A garment rollout from random initial velocities (0.3 m/s, `seed`) with the handles moving
+/// by `drift` per step.
+fn garment_rollout(sim: &Simulator, steps: usize, seed: u64, drift: Vec3) -> Rollout {
+    let t0 = sim.attachment_targets().to_vec();
+    Rollout {
+        x0: sim.positions().to_vec(),
+        v0: random_vectors(sim.num_nodes(), 0.3, seed),
+        targets: (0..steps)
+            .map(|k| t0.iter().map(|t| t + drift * k as f64).collect())
+            .collect(),
+        forces: vec![Vec::new(); steps],
+        params: sim.params().clone(),
+        mu: None,
+    }
+}
+
 /// The hat's curved rest shape makes the bending projection Jacobian non-zero.
 #[test]
 fn gradients_match_finite_differences_on_the_hat() {
     let mut sim = contact_free_garment("hat", 600);
     let steps = 6;
-    let n = sim.num_nodes();
-    let t0 = sim.attachment_targets().to_vec();
-    let base = Rollout {
-        x0: sim.positions().to_vec(),
-        v0: random_vectors(n, 0.3, 5),
-        targets: (0..steps)
-            .map(|k| {
-                t0.iter()
-                    .map(|t| t + Vec3::new(0.0, 0.02, 0.0) * k as f64)
-                    .collect()
-            })
-            .collect(),
-        forces: vec![Vec::new(); steps],
-        params: sim.params().clone(),
-        mu: None,
-    };
+    let base = garment_rollout(&sim, steps, 5, Vec3::new(0.0, 0.02, 0.0));
     check_all_gradients(
         &mut sim,
         &base,
@@ -743,22 +744,7 @@ fn checkpointed_and_full_tapes_give_identical_gradients() {
 fn gradients_match_finite_differences_on_the_sock() {
     let mut sim = contact_free_garment("sock", 400);
     let steps = 4;
-    let n = sim.num_nodes();
-    let t0 = sim.attachment_targets().to_vec();
-    let base = Rollout {
-        x0: sim.positions().to_vec(),
-        v0: random_vectors(n, 0.3, 15),
-        targets: (0..steps)
-            .map(|k| {
-                t0.iter()
-                    .map(|t| t + Vec3::new(0.0, 0.01, 0.02) * k as f64)
-                    .collect()
-            })
-            .collect(),
-        forces: vec![Vec::new(); steps],
-        params: sim.params().clone(),
-        mu: None,
-    };
+    let base = garment_rollout(&sim, steps, 15, Vec3::new(0.0, 0.01, 0.02));
     check_all_gradients(
         &mut sim,
         &base,
