@@ -16,9 +16,6 @@ use crate::tape::{StepRecord, Tape};
 use crate::Vec3;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::matrix_free::bicgstab::{bicgstab, bicgstab_scratch, BicgParams};
-use faer::matrix_free::conjugate_gradient::{
-    conjugate_gradient, conjugate_gradient_scratch, CgError, CgParams,
-};
 use faer::matrix_free::{IdentityPrecond, InitialGuessStatus, LinOp, Precond};
 use faer::prelude::*;
 use faer::reborrow::ReborrowMut;
@@ -644,6 +641,17 @@ impl LinOp<f64> for AdjointOperator<'_> {
 /// `P^{-1}` (the PD factorization, per coordinate) as a faer preconditioner.
 struct PdPreconditioner<'a> {
     factor: &'a SpdFactor,
+    /// The solve's work rows (faer's `LinOp::apply` takes `&self`).
+    work: Mutex<Vec<Vec3>>,
+}
+
+impl<'a> PdPreconditioner<'a> {
+    fn new(factor: &'a SpdFactor) -> Self {
+        Self {
+            factor,
+            work: Mutex::new(vec![Vec3::zeros(); factor.dim()]),
+        }
+    }
 }
 
 impl std::fmt::Debug for PdPreconditioner<'_> {
@@ -654,7 +662,7 @@ impl std::fmt::Debug for PdPreconditioner<'_> {
 
 impl LinOp<f64> for PdPreconditioner<'_> {
     fn apply_scratch(&self, _rhs_ncols: usize, _par: Par) -> StackReq {
-        self.factor.solve_scratch()
+        StackReq::EMPTY
     }
     fn nrows(&self) -> usize {
         3 * self.factor.dim()
@@ -667,32 +675,26 @@ impl LinOp<f64> for PdPreconditioner<'_> {
         mut out: MatMut<'_, f64>,
         rhs: MatRef<'_, f64>,
         _par: Par,
-        stack: &mut MemStack,
+        _stack: &mut MemStack,
     ) {
-        let n = self.factor.dim();
+        let mut work = self.work.lock().expect("preconditioner work");
         for k in 0..rhs.ncols() {
-            // In place: copy the column, then solve on its node-major n x 3 strided view.
-            if let Some(col) = out.rb_mut().col_mut(k).try_as_col_major_mut() {
-                let dst = col.as_slice_mut();
-                for (i, d) in dst.iter_mut().enumerate() {
-                    *d = rhs[(i, k)];
-                }
-                // SAFETY: dst holds 3n contiguous values; rows step by 3, columns by 1.
-                let view =
-                    unsafe { MatMut::from_raw_parts_mut(dst.as_mut_ptr(), n, 3, 3isize, 1isize) };
-                self.factor.solve_columns(view, stack);
+            if let (Some(b), Some(o)) = (
+                col_as_nodes(rhs.col(k)),
+                col_as_nodes_mut(out.rb_mut().col_mut(k)),
+            ) {
+                self.factor.solve_nodes_into(b, o, &mut work);
                 continue;
             }
-            let mut cols = Mat::<f64>::zeros(n, 3);
-            for i in 0..n {
+            // Strided columns (not produced by faer's solvers here): via node copies.
+            let b: Vec<Vec3> = (0..self.factor.dim())
+                .map(|i| Vec3::new(rhs[(3 * i, k)], rhs[(3 * i + 1, k)], rhs[(3 * i + 2, k)]))
+                .collect();
+            let mut o = vec![Vec3::zeros(); b.len()];
+            self.factor.solve_nodes_into(&b, &mut o, &mut work);
+            for (i, v) in o.iter().enumerate() {
                 for d in 0..3 {
-                    cols[(i, d)] = rhs[(3 * i + d, k)];
-                }
-            }
-            self.factor.solve_columns(cols.as_mut(), stack);
-            for i in 0..n {
-                for d in 0..3 {
-                    out[(3 * i + d, k)] = cols[(i, d)];
+                    out[(3 * i + d, k)] = v[d];
                 }
             }
         }
@@ -724,6 +726,47 @@ fn col_to_nodes(c: &Mat<f64>, out: &mut [Vec3]) {
 
 fn norm(v: &[Vec3]) -> f64 {
     v.iter().map(|x| x.norm_squared()).sum::<f64>().sqrt()
+}
+
+fn dot(a: &[Vec3], b: &[Vec3]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x.dot(y)).sum()
+}
+
+/// Work space of the iterative adjoint solves, allocated once per backward pass.
+struct SolveWork<'a> {
+    precond: PdPreconditioner<'a>,
+    /// faer's BiCGStab scratch.
+    stack: MemBuffer,
+    /// Node vectors of PCG and the fixed-point iteration, and the P-solve's work rows.
+    r: Vec<Vec3>,
+    s: Vec<Vec3>,
+    p: Vec<Vec3>,
+    ap: Vec<Vec3>,
+    y: Vec<Vec3>,
+}
+
+impl<'a> SolveWork<'a> {
+    fn new(factor: &'a SpdFactor, op: &AdjointOperator<'_>) -> Self {
+        let precond = PdPreconditioner::new(factor);
+        let n = factor.dim();
+        let stack = MemBuffer::new(bicgstab_scratch(
+            IdentityPrecond { dim: 3 * n },
+            &precond,
+            op,
+            1,
+            Par::Seq,
+        ));
+        let zeros = vec![Vec3::zeros(); n];
+        Self {
+            precond,
+            stack,
+            r: zeros.clone(),
+            s: zeros.clone(),
+            p: zeros.clone(),
+            ap: zeros.clone(),
+            y: zeros,
+        }
+    }
 }
 
 impl Simulator {
@@ -911,26 +954,7 @@ impl Simulator {
             buffers: Mutex::new((vec![Vec3::zeros(); n], vec![Vec3::zeros(); n])),
             contact_scratch: Mutex::default(),
         };
-        let mut scratch = MemBuffer::new(StackReq::any_of(&[
-            bicgstab_scratch(
-                IdentityPrecond { dim: 3 * n },
-                PdPreconditioner {
-                    factor: self.factor(),
-                },
-                &op,
-                1,
-                Par::Seq,
-            ),
-            conjugate_gradient_scratch(
-                PdPreconditioner {
-                    factor: self.factor(),
-                },
-                &op,
-                1,
-                Par::Seq,
-            ),
-            self.factor().solve_scratch(),
-        ]));
+        let mut work = SolveWork::new(self.factor(), &op);
         for &(first, records) in segments.iter().rev() {
             for (offset, rec) in records.iter().enumerate().rev() {
                 let k = first + offset;
@@ -963,7 +987,7 @@ impl Simulator {
                     z_previous.copy_from_slice(&z);
                 }
                 have_previous = true;
-                grads.steps[k] = self.solve_adjoint(&op, &rhs, &mut z, options, &mut scratch)?;
+                grads.steps[k] = self.solve_adjoint(&op, &rhs, &mut z, options, &mut work)?;
                 grads.profile.solve += t_solve.elapsed();
                 let (zeta, frame_x) =
                     self.accumulate(rec, &op.contacts, &op.coupling, &z, &mut grads, k);
@@ -1011,7 +1035,7 @@ impl Simulator {
         g: &[Vec3],
         z: &mut [Vec3],
         options: &BackwardOptions,
-        scratch: &mut MemBuffer,
+        work: &mut SolveWork<'_>,
     ) -> Result<AdjointStepStats> {
         let g_norm = norm(g);
         if g_norm == 0.0 {
@@ -1025,8 +1049,8 @@ impl Simulator {
         };
         let iterative = match options.solver {
             AdjointSolver::Direct => None,
-            AdjointSolver::FixedPoint => Some(self.fixed_point(op, g, z, options, scratch)),
-            AdjointSolver::Krylov => Some(self.krylov(op, g, z, options, scratch)),
+            AdjointSolver::FixedPoint => Some(self.fixed_point(op, g, z, options, work)),
+            AdjointSolver::Krylov => Some(self.krylov(op, g, z, options, work)),
         };
         if let Some(Attempt {
             iterations,
@@ -1063,12 +1087,10 @@ impl Simulator {
         g: &[Vec3],
         z: &mut [Vec3],
         options: &BackwardOptions,
-        scratch: &mut MemBuffer,
+        work: &mut SolveWork<'_>,
     ) -> Attempt {
-        let n = g.len();
         let g_norm = norm(g);
-        let mut rhs = g.to_vec();
-        let (mut pz, mut hz) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n]);
+        let SolveWork { r, s, ap, y, .. } = work;
         // Warm start from the previous step's adjoint (kept in z), unless it is unusable.
         if !z.iter().all(|v| v.iter().all(|c| c.is_finite())) {
             z.iter_mut().for_each(|v| *v = Vec3::zeros());
@@ -1076,10 +1098,10 @@ impl Simulator {
         let mut previous = f64::INFINITY;
         let mut growing = 0;
         for it in 0..=options.max_iterations {
-            op.apply_nodes(z, &mut hz);
+            op.apply_nodes(z, ap);
             let residual = g
                 .iter()
-                .zip(&hz)
+                .zip(ap.iter())
                 .map(|(a, b)| (a - b).norm_squared())
                 .sum::<f64>()
                 .sqrt()
@@ -1095,62 +1117,40 @@ impl Simulator {
                 return Attempt::failed(it);
             }
             previous = residual;
-            self.factor().mul_xyz(z, &mut pz);
-            for i in 0..n {
-                rhs[i] = g[i] + pz[i] - hz[i];
+            // z <- P^{-1} (g + P z - H^T z)
+            self.factor().mul_xyz(z, s);
+            for ((ri, gi), (si, ai)) in r.iter_mut().zip(g).zip(s.iter().zip(ap.iter())) {
+                *ri = gi + si - ai;
             }
-            self.factor().solve_nodes(&mut rhs, MemStack::new(scratch));
-            z.copy_from_slice(&rhs);
+            self.factor().solve_nodes_into(r, z, y);
         }
         Attempt::failed(options.max_iterations)
     }
 
+    /// Krylov solve preconditioned by `P`: CG while `H` is symmetric (no active contact),
+    /// else (or when CG meets negative curvature) faer's BiCGStab.
     fn krylov(
         &self,
         op: &AdjointOperator<'_>,
         g: &[Vec3],
         z: &mut [Vec3],
         options: &BackwardOptions,
-        scratch: &mut MemBuffer,
+        work: &mut SolveWork<'_>,
     ) -> Attempt {
         let n = g.len();
-        let rhs = nodes_to_col(g);
         // Warm start from the previous (later) steps' adjoints: consecutive adjoints are close.
         if !z.iter().all(|v| v.iter().all(|c| c.is_finite())) {
             z.iter_mut().for_each(|v| *v = Vec3::zeros());
         }
-        let mut out = nodes_to_col(z);
-        // Without active contacts H = P - dP is symmetric: preconditioned CG needs one operator
-        // and one preconditioner application per iteration (BiCGStab two of each). CG reports
-        // an indefinite H (possible away from the converged solution); BiCGStab then takes over.
+        let mut spent = 0;
         if op.contacts.is_empty() {
-            let mut cg_out = out.clone();
-            let mut cg = CgParams::<f64>::default();
-            cg.initial_guess = InitialGuessStatus::MaybeNonZero;
-            cg.rel_tolerance = options.tolerance;
-            cg.max_iters = options.max_iterations;
-            let result = conjugate_gradient(
-                cg_out.as_mut(),
-                PdPreconditioner {
-                    factor: self.factor(),
-                },
-                op,
-                rhs.as_ref(),
-                cg,
-                |_| {},
-                Par::Seq,
-                MemStack::new(scratch),
-            );
-            match result {
-                Ok(info) => {
-                    col_to_nodes(&cg_out, z);
-                    return Attempt::converged(info.iter_count);
-                }
-                Err(CgError::NoConvergence { .. }) => return Attempt::failed(cg.max_iters),
-                // Indefinite (possible away from a converged step): BiCGStab takes over.
-                Err(_) => {}
+            match self.pcg(op, g, z, options, work) {
+                Ok(attempt) => return attempt,
+                Err(iterations) => spent = iterations,
             }
         }
+        let rhs = nodes_to_col(g);
+        let mut out = nodes_to_col(z);
         let mut params = BicgParams::<f64>::default();
         // (Also: faer 0.24's BiCGStab leaves its residual vector uninitialized for
         // `InitialGuessStatus::Zero`; `MaybeNonZero` computes r = g - H z0.)
@@ -1161,21 +1161,72 @@ impl Simulator {
         let result = bicgstab(
             out.as_mut(),
             IdentityPrecond { dim: 3 * n },
-            PdPreconditioner {
-                factor: self.factor(),
-            },
+            &work.precond,
             op,
             rhs.as_ref(),
             params,
             |_| {},
             Par::Seq,
-            MemStack::new(scratch),
+            MemStack::new(&mut work.stack),
         );
         col_to_nodes(&out, z);
         match result {
-            Ok(info) => Attempt::converged(info.iter_count),
-            Err(_) => Attempt::failed(params.max_iters),
+            Ok(info) => Attempt::converged(spent + info.iter_count),
+            Err(_) => Attempt::failed(spent + params.max_iters),
         }
+    }
+
+    /// Preconditioned conjugate gradients on `H z = g` (contact-free `H = P - dP` is
+    /// symmetric), stopping at `|g - H z| <= tolerance |g|`. Hand-written rather than faer's
+    /// CG, which is a block method: for one right-hand side its per-iteration k x k Cholesky,
+    /// permutations and gemm calls cost about 5 % of an iteration, and here the vectors stay
+    /// node-major. `Err(iterations)` when `H` shows non-positive curvature (possible away from
+    /// a converged step); `z` then holds the last iterate.
+    fn pcg(
+        &self,
+        op: &AdjointOperator<'_>,
+        g: &[Vec3],
+        z: &mut [Vec3],
+        options: &BackwardOptions,
+        work: &mut SolveWork<'_>,
+    ) -> std::result::Result<Attempt, usize> {
+        let SolveWork { r, s, p, ap, y, .. } = work;
+        let threshold = options.tolerance * norm(g);
+        op.apply_nodes(z, ap);
+        for ((ri, gi), ai) in r.iter_mut().zip(g).zip(ap.iter()) {
+            *ri = gi - ai;
+        }
+        if norm(r) <= threshold {
+            return Ok(Attempt::converged(0));
+        }
+        self.factor().solve_nodes_into(r, s, y);
+        p.copy_from_slice(s);
+        let mut rs = dot(r, s);
+        for it in 1..=options.max_iterations {
+            op.apply_nodes(p, ap);
+            let curvature = dot(p, ap);
+            if !(curvature > 0.0) || !curvature.is_finite() {
+                return Err(it);
+            }
+            let alpha = rs / curvature;
+            for (zi, pi) in z.iter_mut().zip(p.iter()) {
+                *zi += alpha * pi;
+            }
+            for (ri, ai) in r.iter_mut().zip(ap.iter()) {
+                *ri -= alpha * ai;
+            }
+            if norm(r) <= threshold {
+                return Ok(Attempt::converged(it));
+            }
+            self.factor().solve_nodes_into(r, s, y);
+            let rs_next = dot(r, s);
+            let beta = rs_next / rs;
+            rs = rs_next;
+            for (pi, si) in p.iter_mut().zip(s.iter()) {
+                *pi = si + beta * *pi;
+            }
+        }
+        Ok(Attempt::failed(options.max_iterations))
     }
 
     fn direct(&self, op: &AdjointOperator<'_>, g: &[Vec3], z: &mut [Vec3]) -> Result<()> {
