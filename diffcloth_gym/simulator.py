@@ -205,8 +205,8 @@ class Simulator:
 
         ``dl_dx`` and ``dl_dv``: (N, n, 3) gradients of the loss with respect to the positions
         and velocities after each of the N recorded steps (``None`` for zero). ``solver``:
-        ``"krylov"`` (BiCGStab preconditioned by the PD factorization; default), ``"direct"``
-        (sparse LU) or ``"fixed_point"`` (the paper's Eqn. 30); iterative solves that stall fall
+        ``"krylov"`` (CG, or BiCGStab with active contacts, preconditioned by the PD
+        factorization; default), ``"direct"`` (sparse LU) or ``"fixed_point"`` (the paper's Eqn. 30); iterative solves that stall fall
         back to ``"direct"`` and are counted in ``fell_back``.
 
         Returns numpy arrays ``x0``, ``v0`` (n, 3); per step lists ``attachment_targets`` and

@@ -2,8 +2,8 @@
 """Backward benchmark (paper Table 1): ms per step of the adjoint for each solver.
 
 Scenes: Wind and Slope at 12/24/48 and the contact-free Hat; solvers direct (sparse LU),
-krylov (BiCGStab preconditioned by the PD factorization) and fixed_point (paper Eqn. 30) at
-eps 1e-4 and 1e-6; Hat with a loss on the last step only and on every step (controller style).
+krylov (preconditioned by the PD factorization: CG without active contact, else BiCGStab)
+and fixed_point (paper Eqn. 30) at eps 1e-4 and 1e-6; Hat with a loss on the last step only and on every step (controller style).
 Reports backward ms/step, mean solver iterations, fail % (iterative solves that fell back to
 direct), time shares (dP, dR, solve, other), speedup over direct in the same run, the gradient's
 relative error against direct, and the tape's memory per step.
