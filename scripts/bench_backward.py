@@ -104,7 +104,7 @@ def main():
         print(f"{name} ({loss}): done", flush=True)
     notes = (
         f"{steps} recorded steps per scene at the default forward settings (Anderson, tolerance 1e-8, recorded "
-        "steps to 1e-10), one thread; `grad_rel_err` = relative L2 error of dL/dv0 against direct. Loss: random "
+        "steps to 1e-11), one thread; `grad_rel_err` = relative L2 error of dL/dv0 against direct. Loss: random "
         "linear weights on the positions of every step (`every`, controller style) or of the last step only. "
         "Reference C++ (single thread): Hat 2.7-4.8 ms/step with a final-step loss, 74-107 ms/step controller "
         "style (its fixed-point iteration falls back to LU on 44-92 % of steps); Wind 12/24/48: 0.36 / 1.6 / 7.0 "
