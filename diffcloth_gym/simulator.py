@@ -103,8 +103,14 @@ class Simulator:
         stats = self._core.step(targets, forces, steps)
         missed = self._core.profile()["unconverged_steps"] - before
         if missed and self._core.solver()["tolerance"] > 0:
+            hint = ""
+            active = stats["contacts"]["stick"] + stats["contacts"]["slip"]
+            if active and (self.config.get("contact") or {}).get("response", "inertia") == "inertia":
+                hint = ("; with stiff cloth at large steps, contact.response = 'delassus' keeps every iterate "
+                        "out of the obstacles")
             warnings.warn(f"{int(missed)} step(s) stopped at the iteration cap above the tolerance (last: residual "
-                          f"{stats['residual']:.1e} after {stats['iterations']} iterations)", ConvergenceWarning, stacklevel=2)
+                          f"{stats['residual']:.1e} after {stats['iterations']} iterations){hint}",
+                          ConvergenceWarning, stacklevel=2)
         return stats
 
     @property

@@ -1205,7 +1205,8 @@ impl Simulator {
         for it in 1..=options.max_iterations {
             op.apply_nodes(p, ap);
             let curvature = dot(p, ap);
-            if !(curvature > 0.0) || !curvature.is_finite() {
+            let positive = curvature.is_finite() && curvature > 0.0;
+            if !positive {
                 return Err(it);
             }
             let alpha = rs / curvature;

@@ -78,6 +78,7 @@ pub fn signorini_coulomb(d: Vec3, n: Vec3, gap: f64, mass: f64, h: f64, mu: f64)
 pub struct ContactSettings {
     /// Distance kept between a node and an obstacle surface (m).
     pub thickness: f64,
+    pub response: crate::config::ContactResponse,
     /// Extra detection distance beyond what the step's motion can close (m).
     pub margin: f64,
     /// Friction on (else every mu is treated as 0).
@@ -118,6 +119,11 @@ pub struct ContactSet {
 impl ContactSet {
     pub fn is_empty(&self) -> bool {
         self.contacts.is_empty()
+    }
+
+    /// Nodes in at least one contact, each once.
+    pub fn nodes(&self) -> &[usize] {
+        &self.nodes
     }
 
     /// No contact exerts a force at the last solve (true without contacts).

@@ -4,7 +4,9 @@
 
 use crate::anderson::Anderson;
 use crate::collision::{Motion, Obstacle, SelfCollision, Shape};
-use crate::config::{SceneConfig, ShapeConfig};
+use crate::config::{ContactResponse, SceneConfig, ShapeConfig};
+use crate::delassus::Delassus;
+
 use crate::contact::{BranchCounts, Contact, ContactSet, ContactSettings};
 use crate::effects::Effects;
 use crate::energy::{Attachments, Bend, PdConstraints, Stretch};
@@ -97,6 +99,8 @@ pub struct Simulator {
     self_collision: Option<SelfCollision>,
     contact_settings: ContactSettings,
     contacts: ContactSet,
+    /// The step's Delassus operator (contact response `delassus` only).
+    delassus: Delassus,
     /// Scratch of the contact detection: velocities that set each node's reach, and which
     /// nodes have a contact with the obstacle being checked.
     detect_velocity: Vec<Vec3>,
@@ -223,6 +227,7 @@ impl Simulator {
             thickness: contact_cfg.thickness,
             margin: contact_cfg.margin,
             friction: effects.friction,
+            response: contact_cfg.response,
         };
         let mass: Vec<f64> = node_area.iter().map(|a| params.density * a).collect();
         let mut sim = Self {
@@ -239,6 +244,7 @@ impl Simulator {
             self_collision,
             contact_settings,
             contacts: ContactSet::default(),
+            delassus: Delassus::default(),
             detect_velocity: Vec::with_capacity(n),
             covered: Vec::with_capacity(n),
             factor: SpdFactor::new(1, &[(0, 0, 1.0)])?,
@@ -649,6 +655,17 @@ impl Simulator {
         );
         self.detect_velocity = velocity;
         self.profile.detection += detect_start.elapsed();
+        if self.delassus_response() {
+            let start = Instant::now();
+            self.delassus.build(&self.factor, &self.contacts.contacts);
+            self.profile.contact_solve += start.elapsed();
+            self.profile.delassus_builds += 1;
+        }
+    }
+
+    /// Whether this step's contacts respond through the Delassus operator.
+    fn delassus_response(&self) -> bool {
+        !self.contacts.is_empty() && self.contact_settings.response == ContactResponse::Delassus
     }
 
     /// Whether the solved step (`mapped`) put a node that has no contact with an obstacle
@@ -795,6 +812,16 @@ impl Simulator {
         timed(&mut self.profile.global, || {
             factor.solve_xyz(&mut self.update)
         });
+        if self.delassus_response() {
+            let start = Instant::now();
+            self.delassus.respond(
+                &mut self.update,
+                &self.x,
+                self.params.h,
+                &mut self.contacts.contacts,
+            );
+            self.profile.contact_solve += start.elapsed();
+        }
         let mut sum = 0.0;
         for ((u, g), x) in self
             .update
@@ -983,7 +1010,8 @@ impl Simulator {
 
     /// Adds this iteration's contact forces at the iterate to the right-hand side in `update`.
     fn solve_contacts(&mut self, which: Buffer) {
-        if self.contacts.is_empty() {
+        // (The Delassus response acts after the global solve instead.)
+        if self.contacts.is_empty() || self.delassus_response() {
             return;
         }
         let start = Instant::now();

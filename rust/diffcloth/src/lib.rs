@@ -7,6 +7,7 @@ pub mod backward;
 pub mod collision;
 pub mod config;
 pub mod contact;
+pub mod delassus;
 pub mod effects;
 pub mod energy;
 pub mod error;

@@ -30,8 +30,10 @@ pub struct Profile {
     pub redetections: u64,
     /// Collision detection (obstacle queries and the self-collision spatial hash).
     pub detection: Duration,
-    /// Per-iteration Signorini-Coulomb contact solves.
+    /// Per-iteration Signorini-Coulomb contact solves (and forming the Delassus operators).
     pub contact_solve: Duration,
+    /// Contact sets that responded through the Delassus operator (see `ContactResponse`).
+    pub delassus_builds: u64,
     /// Contacts at the end of each step, summed over steps, by branch.
     pub contacts_take_off: u64,
     pub contacts_stick: u64,
@@ -63,6 +65,7 @@ impl Profile {
             ("refactor_s", self.refactor.as_secs_f64()),
             ("detection_s", self.detection.as_secs_f64()),
             ("contact_s", self.contact_solve.as_secs_f64()),
+            ("delassus_builds", self.delassus_builds as f64),
             ("contacts_take_off", self.contacts_take_off as f64),
             ("contacts_stick", self.contacts_stick as f64),
             ("contacts_slip", self.contacts_slip as f64),

@@ -408,7 +408,9 @@ fn gradients_match_finite_differences_on_the_hat() {
 }
 
 /// A 4x4 cloth on an obstacle with friction; `v0` chosen so one branch holds everywhere.
-fn contact_scene(obstacle: &str, mu: f64, placement: &str) -> Simulator {
+/// A 4x4 patch against `obstacle`. `response`: how the forward solves the contact law; the
+/// adjoint is the same for both (it linearizes the law at the converged step).
+fn contact_scene(obstacle: &str, mu: f64, placement: &str, response: &str) -> Simulator {
     sim_from_toml(&format!(
         r#"
 h = 0.01
@@ -427,6 +429,7 @@ density = 0.2
 k_stretch = 60.0
 [contact]
 thickness = 0.01
+response = "{response}"
 [[obstacles]]
 mu = {mu}
 shape = {obstacle}
@@ -469,90 +472,96 @@ fn incline(theta_deg: f64) -> (String, String, Vec3, Vec3) {
 
 #[test]
 fn gradients_through_sticking_contact_match_finite_differences() {
-    let (shape, placement, _, _) = incline(20.0);
-    let mut sim = contact_scene(&shape, 0.6, &placement);
-    let steps = 10;
-    let base = contact_rollout(&sim, vec![Vec3::zeros(); sim.num_nodes()], steps, 0.6, 1e-4);
-    check_all_gradients(
-        &mut sim,
-        &base,
-        steps,
-        &[
-            AdjointSolver::Direct,
-            AdjointSolver::Krylov,
-            AdjointSolver::FixedPoint,
-        ],
-        1.0,
-    );
-    assert!(sim
-        .contacts()
-        .iter()
-        .all(|c| c.branch == diffcloth::Branch::Stick));
+    for response in ["inertia", "delassus"] {
+        let (shape, placement, _, _) = incline(20.0);
+        let mut sim = contact_scene(&shape, 0.6, &placement, response);
+        let steps = 10;
+        let base = contact_rollout(&sim, vec![Vec3::zeros(); sim.num_nodes()], steps, 0.6, 1e-4);
+        check_all_gradients(
+            &mut sim,
+            &base,
+            steps,
+            &[
+                AdjointSolver::Direct,
+                AdjointSolver::Krylov,
+                AdjointSolver::FixedPoint,
+            ],
+            1.0,
+        );
+        assert!(sim
+            .contacts()
+            .iter()
+            .all(|c| c.branch == diffcloth::Branch::Stick));
+    }
 }
 
 #[test]
 fn gradients_through_slipping_contact_match_finite_differences() {
-    let (shape, placement, _, downhill) = incline(40.0);
-    let mut sim = contact_scene(&shape, 0.3, &placement);
-    let steps = 10;
-    let n = sim.num_nodes();
-    // Sliding downhill and slightly sideways, with some spread between nodes.
-    let v0: Vec<Vec3> = random_vectors(n, 0.05, 9)
-        .iter()
-        .map(|d| {
-            1.0 * downhill
-                + Vec3::new(0.0, 0.0, 0.3)
-                + Vec3::new(d.x, d.y, d.z) * 0.0
-                + Vec3::new(0.0, 0.0, d.z)
-        })
-        .collect();
-    let base = contact_rollout(&sim, v0, steps, 0.3, 1e-3);
-    check_all_gradients(
-        &mut sim,
-        &base,
-        steps,
-        &[
-            AdjointSolver::Direct,
-            AdjointSolver::Krylov,
-            AdjointSolver::FixedPoint,
-        ],
-        1.0,
-    );
-    assert!(sim
-        .contacts()
-        .iter()
-        .all(|c| c.branch == diffcloth::Branch::Slip));
+    for response in ["inertia", "delassus"] {
+        let (shape, placement, _, downhill) = incline(40.0);
+        let mut sim = contact_scene(&shape, 0.3, &placement, response);
+        let steps = 10;
+        let n = sim.num_nodes();
+        // Sliding downhill and slightly sideways, with some spread between nodes.
+        let v0: Vec<Vec3> = random_vectors(n, 0.05, 9)
+            .iter()
+            .map(|d| {
+                1.0 * downhill
+                    + Vec3::new(0.0, 0.0, 0.3)
+                    + Vec3::new(d.x, d.y, d.z) * 0.0
+                    + Vec3::new(0.0, 0.0, d.z)
+            })
+            .collect();
+        let base = contact_rollout(&sim, v0, steps, 0.3, 1e-3);
+        check_all_gradients(
+            &mut sim,
+            &base,
+            steps,
+            &[
+                AdjointSolver::Direct,
+                AdjointSolver::Krylov,
+                AdjointSolver::FixedPoint,
+            ],
+            1.0,
+        );
+        assert!(sim
+            .contacts()
+            .iter()
+            .all(|c| c.branch == diffcloth::Branch::Slip));
+    }
 }
 
 /// On a sphere the contact frame depends on x_n (normal and gap): the frame terms.
 #[test]
 fn gradients_through_slipping_contact_on_a_sphere_match_finite_differences() {
-    let shape = r#"{ kind = "sphere", center = [0.0, 0.0, 0.0], radius = 1.0 }"#;
-    let mut sim = contact_scene(shape, 0.2, "translate = [0.2, 1.01, 0.1]");
-    let steps = 3;
-    let n = sim.num_nodes();
-    let v0: Vec<Vec3> = random_vectors(n, 0.05, 4)
-        .iter()
-        .map(|d| Vec3::new(0.8, -0.1, 0.3) + d)
-        .collect();
-    let base = contact_rollout(&sim, v0, steps, 0.2, 1e-3);
-    check_all_gradients(
-        &mut sim,
-        &base,
-        steps,
-        &[
-            AdjointSolver::Direct,
-            AdjointSolver::Krylov,
-            AdjointSolver::FixedPoint,
-        ],
-        1.0,
-    );
-    let active = sim
-        .contacts()
-        .iter()
-        .filter(|c| c.branch == diffcloth::Branch::Slip)
-        .count();
-    assert!(active >= 2, "nodes slide over the sphere: {active}");
+    for response in ["inertia", "delassus"] {
+        let shape = r#"{ kind = "sphere", center = [0.0, 0.0, 0.0], radius = 1.0 }"#;
+        let mut sim = contact_scene(shape, 0.2, "translate = [0.2, 1.01, 0.1]", response);
+        let steps = 3;
+        let n = sim.num_nodes();
+        let v0: Vec<Vec3> = random_vectors(n, 0.05, 4)
+            .iter()
+            .map(|d| Vec3::new(0.8, -0.1, 0.3) + d)
+            .collect();
+        let base = contact_rollout(&sim, v0, steps, 0.2, 1e-3);
+        check_all_gradients(
+            &mut sim,
+            &base,
+            steps,
+            &[
+                AdjointSolver::Direct,
+                AdjointSolver::Krylov,
+                AdjointSolver::FixedPoint,
+            ],
+            1.0,
+        );
+        let active = sim
+            .contacts()
+            .iter()
+            .filter(|c| c.branch == diffcloth::Branch::Slip)
+            .count();
+        assert!(active >= 2, "nodes slide over the sphere: {active}");
+    }
 }
 
 #[test]

@@ -1,6 +1,7 @@
 //! Integration tests of the simulator: each checks a physical fact, not only that it runs.
 mod common;
 mod contact;
+mod contact_response;
 mod forward_physics;
 mod gradients;
 mod pd_solver;

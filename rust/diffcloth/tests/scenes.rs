@@ -52,6 +52,7 @@ fn hat_moves_if_bending_targeted_a_flat_shape() {
     cfg.effects = vec![Effect::Stretch, Effect::Bend, Effect::Gravity];
     cfg.attachments = None;
     cfg.obstacles.clear();
+    cfg.contact = None;
     cfg.self_collision = None;
     let mut sim = Simulator::new(&cfg).unwrap();
     let rest = sim.positions().to_vec();
