@@ -508,7 +508,6 @@ struct AdjointOperator<'a> {
     lin: Linearization,
     contacts: Vec<ContactLin>,
     coupling: ContactCoupling,
-    buffers: Mutex<(Vec<Vec3>, Vec<Vec3>)>,
     /// Scratch of the contact term (kept across applications: no allocation per iteration).
     contact_scratch: Mutex<ContactScratch>,
 }
@@ -587,6 +586,35 @@ fn col_as_nodes_mut(c: faer::ColMut<'_, f64>) -> Option<&mut [Vec3]> {
     })
 }
 
+/// Applies the node-major map `f(input, output)` to every column of `rhs`: in place on
+/// contiguous columns (what faer's solvers pass), through node copies otherwise.
+fn apply_per_column(
+    mut out: MatMut<'_, f64>,
+    rhs: MatRef<'_, f64>,
+    mut f: impl FnMut(&[Vec3], &mut [Vec3]),
+) {
+    let n = rhs.nrows() / 3;
+    for k in 0..rhs.ncols() {
+        if let (Some(v), Some(o)) = (
+            col_as_nodes(rhs.col(k)),
+            col_as_nodes_mut(out.rb_mut().col_mut(k)),
+        ) {
+            f(v, o);
+            continue;
+        }
+        let v: Vec<Vec3> = (0..n)
+            .map(|i| Vec3::new(rhs[(3 * i, k)], rhs[(3 * i + 1, k)], rhs[(3 * i + 2, k)]))
+            .collect();
+        let mut o = vec![Vec3::zeros(); n];
+        f(&v, &mut o);
+        for (i, x) in o.iter().enumerate() {
+            for d in 0..3 {
+                out[(3 * i + d, k)] = x[d];
+            }
+        }
+    }
+}
+
 impl LinOp<f64> for AdjointOperator<'_> {
     fn apply_scratch(&self, _rhs_ncols: usize, _par: Par) -> StackReq {
         StackReq::EMPTY
@@ -599,33 +627,12 @@ impl LinOp<f64> for AdjointOperator<'_> {
     }
     fn apply(
         &self,
-        mut out: MatMut<'_, f64>,
+        out: MatMut<'_, f64>,
         rhs: MatRef<'_, f64>,
         _par: Par,
         _stack: &mut MemStack,
     ) {
-        if rhs.ncols() == 1 {
-            if let (Some(v), Some(o)) = (
-                col_as_nodes(rhs.col(0)),
-                col_as_nodes_mut(out.rb_mut().col_mut(0)),
-            ) {
-                self.apply_nodes(v, o);
-                return;
-            }
-        }
-        let mut guard = self.buffers.lock().expect("operator buffers");
-        let (v, hv) = &mut *guard;
-        for k in 0..rhs.ncols() {
-            for (i, vi) in v.iter_mut().enumerate() {
-                *vi = Vec3::new(rhs[(3 * i, k)], rhs[(3 * i + 1, k)], rhs[(3 * i + 2, k)]);
-            }
-            self.apply_nodes(v, hv);
-            for (i, h) in hv.iter().enumerate() {
-                for d in 0..3 {
-                    out[(3 * i + d, k)] = h[d];
-                }
-            }
-        }
+        apply_per_column(out, rhs, |v, o| self.apply_nodes(v, o));
     }
     fn conj_apply(
         &self,
@@ -672,32 +679,15 @@ impl LinOp<f64> for PdPreconditioner<'_> {
     }
     fn apply(
         &self,
-        mut out: MatMut<'_, f64>,
+        out: MatMut<'_, f64>,
         rhs: MatRef<'_, f64>,
         _par: Par,
         _stack: &mut MemStack,
     ) {
         let mut work = self.work.lock().expect("preconditioner work");
-        for k in 0..rhs.ncols() {
-            if let (Some(b), Some(o)) = (
-                col_as_nodes(rhs.col(k)),
-                col_as_nodes_mut(out.rb_mut().col_mut(k)),
-            ) {
-                self.factor.solve_nodes_into(b, o, &mut work);
-                continue;
-            }
-            // Strided columns (not produced by faer's solvers here): via node copies.
-            let b: Vec<Vec3> = (0..self.factor.dim())
-                .map(|i| Vec3::new(rhs[(3 * i, k)], rhs[(3 * i + 1, k)], rhs[(3 * i + 2, k)]))
-                .collect();
-            let mut o = vec![Vec3::zeros(); b.len()];
-            self.factor.solve_nodes_into(&b, &mut o, &mut work);
-            for (i, v) in o.iter().enumerate() {
-                for d in 0..3 {
-                    out[(3 * i + d, k)] = v[d];
-                }
-            }
-        }
+        apply_per_column(out, rhs, |b, o| {
+            self.factor.solve_nodes_into(b, o, &mut work)
+        });
     }
     fn conj_apply(
         &self,
@@ -951,7 +941,6 @@ impl Simulator {
             lin: Linearization::new(self),
             contacts: Vec::new(),
             coupling: ContactCoupling::default(),
-            buffers: Mutex::new((vec![Vec3::zeros(); n], vec![Vec3::zeros(); n])),
             contact_scratch: Mutex::default(),
         };
         let mut work = SolveWork::new(self.factor(), &op);
