@@ -6,11 +6,12 @@ clipping: recorded steps converge to solver.record_tolerance (default 1e-11).
 """
 
 import tomllib
+import warnings
 
 import numpy as np
 import pytest
 
-from diffcloth_gym import Simulator
+from diffcloth_gym import ConvergenceWarning, Simulator
 from diffcloth_gym.simulator import CONFIG_DIR
 
 STEPS = 400
@@ -60,19 +61,30 @@ def test_default_settings_give_the_converged_gradient(name, mesh):
         assert cos >= 0.99 and rel <= 1e-2, (name, rel, cos)
 
 
-def test_sock_with_foot_and_self_contact_gives_the_converged_gradient():
-    """The full Sock scene: the foot, the leg and self-contact, 400 steps, friction in every
-    contact branch. (The Hat with its head is not here: it buckles against the head at
-    about step 70 where forward differences of 1e-7 grow 1e4-fold, so the 1e-10 and 1e-12
-    trajectories part; 1e-11 and 1e-12 agree to 5e-3.)"""
-    cfg = tomllib.loads((CONFIG_DIR / "sock.toml").read_text())
-    default, default_targets = rollout_gradients(cfg)
-    converged, converged_targets = rollout_gradients(cfg, tolerance=1e-12, record_tolerance=1e-12, max_iterations=5000)
+@pytest.mark.parametrize("name", ["sock", "hat"])
+def test_full_scenes_with_contact_give_the_converged_gradient(name):
+    """The full scenes, 400 steps: the Sock with its foot, leg and self-contact (friction in
+    every contact branch), the Hat on its head. The Hat buckles against the head at about
+    step 70, where forward differences of 1e-7 grow 1e4-fold: recorded at 1e-10 its trajectory
+    parted from the 1e-12 one (gradients 0.56 apart); at the default 1e-11 they agree to 3e-3.
+    Its friction gradient is checked; self-contact never pushes on the Hat (mu_self is 0)."""
+    cfg = tomllib.loads((CONFIG_DIR / f"{name}.toml").read_text())
+    with warnings.catch_warnings():
+        # One Hat step stops at record_max_iterations at 4e-10 (under the trusted 1e-9).
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        default, default_targets = rollout_gradients(cfg)
+        converged, converged_targets = rollout_gradients(cfg, tolerance=1e-12, record_tolerance=1e-12,
+                                                         max_iterations=5000)
     assert default["warnings"] == [] and converged["warnings"] == []
-    for got, ref in [(default["v0"], converged["v0"]), (default_targets, converged_targets),
-                     (default["mu_obstacles"], converged["mu_obstacles"]), (default["mu_self"], converged["mu_self"])]:
+    pairs = [(default["v0"], converged["v0"]), (default_targets, converged_targets),
+             (default["mu_obstacles"], converged["mu_obstacles"])]
+    if name == "hat":
+        assert default["mu_self"] == 0.0 and converged["mu_self"] == 0.0
+    else:
+        pairs.append((default["mu_self"], converged["mu_self"]))
+    for got, ref in pairs:
         rel, cos = compare(got, ref)
-        assert cos >= 0.99 and rel <= 1e-2, (rel, cos)
+        assert cos >= 0.99 and rel <= 1e-2, (name, rel, cos)
 
 
 def test_loose_recording_is_reported_not_hidden():
