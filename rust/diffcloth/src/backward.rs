@@ -625,13 +625,7 @@ impl LinOp<f64> for AdjointOperator<'_> {
     fn ncols(&self) -> usize {
         3 * self.sim.num_nodes()
     }
-    fn apply(
-        &self,
-        out: MatMut<'_, f64>,
-        rhs: MatRef<'_, f64>,
-        _par: Par,
-        _stack: &mut MemStack,
-    ) {
+    fn apply(&self, out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, _par: Par, _stack: &mut MemStack) {
         apply_per_column(out, rhs, |v, o| self.apply_nodes(v, o));
     }
     fn conj_apply(
@@ -677,13 +671,7 @@ impl LinOp<f64> for PdPreconditioner<'_> {
     fn ncols(&self) -> usize {
         3 * self.factor.dim()
     }
-    fn apply(
-        &self,
-        out: MatMut<'_, f64>,
-        rhs: MatRef<'_, f64>,
-        _par: Par,
-        _stack: &mut MemStack,
-    ) {
+    fn apply(&self, out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, _par: Par, _stack: &mut MemStack) {
         let mut work = self.work.lock().expect("preconditioner work");
         apply_per_column(out, rhs, |b, o| {
             self.factor.solve_nodes_into(b, o, &mut work)
@@ -1031,10 +1019,11 @@ impl Simulator {
             z.iter_mut().for_each(|v| *v = Vec3::zeros());
             return Ok(AdjointStepStats::default());
         }
-        let residual_of = |z: &[Vec3]| {
-            let mut hz = vec![Vec3::zeros(); z.len()];
-            op.apply_nodes(z, &mut hz);
-            norm(&hz.iter().zip(g).map(|(a, b)| b - a).collect::<Vec<_>>()) / g_norm
+        // |g - H z| / |g|, into the work rows (no allocation per step).
+        let residual_of = |z: &[Vec3], hz: &mut [Vec3]| {
+            op.apply_nodes(z, hz);
+            let r2: f64 = hz.iter().zip(g).map(|(a, b)| (b - a).norm_squared()).sum();
+            r2.sqrt() / g_norm
         };
         let iterative = match options.solver {
             AdjointSolver::Direct => None,
@@ -1046,7 +1035,7 @@ impl Simulator {
             converged: true,
         }) = iterative
         {
-            let residual = residual_of(z);
+            let residual = residual_of(z, &mut work.ap);
             if residual <= options.tolerance * 10.0
                 && z.iter().all(|v| v.iter().all(|c| c.is_finite()))
             {
@@ -1061,7 +1050,7 @@ impl Simulator {
         Ok(AdjointStepStats {
             iterations: iterative.map_or(0, |a| a.iterations),
             fell_back: iterative.is_some(),
-            residual: residual_of(z),
+            residual: residual_of(z, &mut work.ap),
         })
     }
 

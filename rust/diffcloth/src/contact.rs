@@ -121,11 +121,6 @@ impl ContactSet {
         self.contacts.is_empty()
     }
 
-    /// Nodes in at least one contact, each once.
-    pub fn nodes(&self) -> &[usize] {
-        &self.nodes
-    }
-
     /// No contact exerts a force at the last solve (true without contacts).
     pub fn all_take_off(&self) -> bool {
         self.contacts.iter().all(|c| c.branch == Branch::TakeOff)

@@ -46,15 +46,6 @@ pub struct Delassus {
 }
 
 impl Delassus {
-    /// Number of contact nodes of the current operator.
-    pub fn len(&self) -> usize {
-        self.nodes.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.nodes.is_empty()
-    }
-
     /// Forms `G` and `W` for this step's contacts: `ceil(c / 3)` solves with `P` (three unit
     /// columns per node-major solve, one per coordinate).
     pub fn build(&mut self, factor: &SpdFactor, contacts: &[Contact]) {
