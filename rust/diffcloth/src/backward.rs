@@ -761,12 +761,12 @@ impl Simulator {
         let tape = self.take_tape().ok_or_else(|| {
             Error::Input("no tape: call set_recording(true) before the rollout".into())
         })?;
-        let result = if tape.checkpoint_every.is_some() {
+        let result = if let Tape::Checkpointed { .. } = tape {
             self.backward_checkpointed(&tape, dl_dx, dl_dv, options)
         } else {
             self.backward_segments(
                 &tape,
-                &[(0, &tape.records[..])],
+                &[(0, tape.records())],
                 dl_dx,
                 dl_dv,
                 options,
@@ -798,12 +798,20 @@ impl Simulator {
             self.time(),
             self.attachment_targets().to_vec(),
         );
+        let Tape::Checkpointed {
+            checkpoints,
+            inputs,
+            ..
+        } = tape
+        else {
+            unreachable!("called for checkpointed tapes only")
+        };
         let steps = tape.len();
         let mut state: Option<Resume> = None;
         let mut outcome = Ok(());
-        for (s, cp) in tape.checkpoints.iter().enumerate().rev() {
-            let end = tape.checkpoints.get(s + 1).map_or(steps, |c| c.step);
-            let records = match self.resimulate(cp, &tape.inputs[cp.step..end]) {
+        for (s, cp) in checkpoints.iter().enumerate().rev() {
+            let end = checkpoints.get(s + 1).map_or(steps, |c| c.step);
+            let records = match self.resimulate(cp, &inputs[cp.step..end]) {
                 Ok(r) => r,
                 Err(e) => {
                     outcome = Err(e);
@@ -863,7 +871,10 @@ impl Simulator {
                 external_forces: input.forces.as_deref(),
             })?;
         }
-        Ok(self.take_tape().map(|t| t.records).unwrap_or_default())
+        Ok(match self.take_tape() {
+            Some(Tape::Full { records }) => records,
+            _ => Vec::new(),
+        })
     }
 
     /// Backpropagates through `segments` (each `(first step index, records)`, in increasing

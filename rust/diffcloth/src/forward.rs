@@ -16,7 +16,7 @@ use crate::linalg::SpdFactor;
 use crate::mesh::TriMesh;
 use crate::profile::{timed, Profile};
 use crate::scene::{attachment_nodes, build_mesh};
-use crate::tape::{Checkpoint, StepInputs, StepRecord, Tape};
+use crate::tape::{CompletedStep, Tape};
 use crate::Vec3;
 use std::time::Instant;
 
@@ -447,7 +447,7 @@ impl Simulator {
         self.time = 0.0;
         self.step_count = 0;
         if let Some(tape) = self.tape.as_mut() {
-            tape.records.clear();
+            tape.clear();
         }
         Ok(())
     }
@@ -551,7 +551,6 @@ impl Simulator {
         let start = Instant::now();
         let p0 = self.profile.clone();
         self.prepare(input)?;
-        self.record_inputs(&input);
         if self.effects.has_contact() {
             self.detect_contacts(false);
         }
@@ -568,33 +567,20 @@ impl Simulator {
         // The PD result is in `mapped`.
         let h = self.params.h;
         if !self.mapped.iter().all(|p| p.iter().all(|c| c.is_finite())) {
-            if let Some(tape) = self.tape.as_mut().filter(|t| t.checkpoint_every.is_some()) {
-                // The step did not happen: forget its inputs (and its checkpoint).
-                tape.inputs.pop();
-                if tape
-                    .checkpoints
-                    .last()
-                    .is_some_and(|c| c.step == tape.inputs.len())
-                {
-                    tape.checkpoints.pop();
-                }
-            }
             return Err(Error::Diverged(format!(
                 "non-finite positions at step {}; state left at the previous step",
                 self.step_count
             )));
         }
-        if let Some(tape) = self.tape.as_mut().filter(|t| t.checkpoint_every.is_none()) {
-            tape.records.push(StepRecord {
-                x_prev: self.x.clone(),
-                v_prev: self.v.clone(),
-                x_next: self.mapped.clone(),
-                targets: self
-                    .attachments
-                    .as_ref()
-                    .map_or(Vec::new(), |a| a.targets().to_vec()),
+        if let Some(tape) = self.tape.as_mut() {
+            tape.push(&CompletedStep {
+                x_prev: &self.x,
+                v_prev: &self.v,
+                x_next: &self.mapped,
+                targets: self.attachments.as_ref().map(|a| a.targets()),
+                forces: input.external_forces,
                 time: self.time,
-                contacts: self.contacts.contacts.clone(),
+                contacts: &self.contacts.contacts,
                 residual: stats.residual,
             });
         }
@@ -698,30 +684,6 @@ impl Simulator {
         self.covered = covered;
         self.profile.detection += detect_start.elapsed();
         missed
-    }
-
-    /// Checkpointed recording: the entering state at segment starts, and every step's inputs.
-    fn record_inputs(&mut self, input: &StepInput<'_>) {
-        let Some(tape) = self.tape.as_mut() else {
-            return;
-        };
-        let Some(every) = tape.checkpoint_every else {
-            return;
-        };
-        let index = tape.inputs.len();
-        if index % every == 0 {
-            tape.checkpoints.push(Checkpoint {
-                step: index,
-                x: self.x.clone(),
-                v: self.v.clone(),
-                time: self.time,
-            });
-        }
-        tape.inputs.push(StepInputs {
-            // `prepare` has already applied this step's targets.
-            targets: self.attachments.as_ref().map(|a| a.targets().to_vec()),
-            forces: input.external_forces.map(<[Vec3]>::to_vec),
-        });
     }
 
     /// Validates the inputs and computes the inertial prediction

@@ -49,33 +49,73 @@ pub struct StepInputs {
     pub forces: Option<Vec<Vec3>>,
 }
 
-/// Recorded steps. Either every step's full record, or (checkpointed) one state every
-/// `every` steps plus each step's inputs: memory then grows with the horizon only through the
-/// inputs (a few values per step for end effectors), and backward re-simulates one segment
-/// at a time.
-#[derive(Debug, Clone, Default)]
-pub struct Tape {
-    pub records: Vec<StepRecord>,
-    /// `Some(every)` for a checkpointed tape.
-    pub checkpoint_every: Option<usize>,
-    pub checkpoints: Vec<Checkpoint>,
-    pub inputs: Vec<StepInputs>,
+/// One completed step as the forward pass hands it to the tape (borrowed: the tape copies
+/// what its mode keeps).
+pub struct CompletedStep<'a> {
+    pub x_prev: &'a [Vec3],
+    pub v_prev: &'a [Vec3],
+    pub x_next: &'a [Vec3],
+    /// Attachment targets in effect (None: the scene has no attachments).
+    pub targets: Option<&'a [Vec3]>,
+    pub forces: Option<&'a [Vec3]>,
+    pub time: f64,
+    pub contacts: &'a [Contact],
+    pub residual: f64,
+}
+
+/// Recorded steps, in one of two modes. Only completed steps are pushed, so a step that
+/// fails leaves the tape as it was.
+#[derive(Debug, Clone)]
+pub enum Tape {
+    /// Every step's full record.
+    Full { records: Vec<StepRecord> },
+    /// One state every `every` steps plus each step's inputs: memory grows with the horizon
+    /// only through the inputs (a few values per step for end effectors), and backward
+    /// re-simulates one segment at a time.
+    Checkpointed {
+        every: usize,
+        checkpoints: Vec<Checkpoint>,
+        inputs: Vec<StepInputs>,
+    },
+}
+
+impl Default for Tape {
+    fn default() -> Self {
+        Self::Full {
+            records: Vec::new(),
+        }
+    }
 }
 
 impl Tape {
     pub fn checkpointed(every: usize) -> Self {
-        Self {
-            checkpoint_every: Some(every.max(1)),
-            ..Default::default()
+        Self::Checkpointed {
+            every: every.max(1),
+            checkpoints: Vec::new(),
+            inputs: Vec::new(),
+        }
+    }
+
+    /// Forgets every recorded step (both modes), keeping the mode.
+    pub fn clear(&mut self) {
+        match self {
+            Self::Full { records } => records.clear(),
+            Self::Checkpointed {
+                checkpoints,
+                inputs,
+                ..
+            } => {
+                checkpoints.clear();
+                inputs.clear();
+            }
         }
     }
 
     /// Recorded steps.
     pub fn len(&self) -> usize {
-        if self.checkpoint_every.is_some() {
-            self.inputs.len()
-        } else {
-            self.records.len()
+        match self {
+            Self::Full { records } => records.len(),
+            Self::Checkpointed { inputs, .. } => inputs.len(),
         }
     }
 
@@ -83,23 +123,72 @@ impl Tape {
         self.len() == 0
     }
 
+    /// Appends a completed step in this tape's mode.
+    pub fn push(&mut self, step: &CompletedStep<'_>) {
+        match self {
+            Self::Full { records } => records.push(StepRecord {
+                x_prev: step.x_prev.to_vec(),
+                v_prev: step.v_prev.to_vec(),
+                x_next: step.x_next.to_vec(),
+                targets: step.targets.map_or_else(Vec::new, <[Vec3]>::to_vec),
+                time: step.time,
+                contacts: step.contacts.to_vec(),
+                residual: step.residual,
+            }),
+            Self::Checkpointed {
+                every,
+                checkpoints,
+                inputs,
+            } => {
+                let index = inputs.len();
+                if index % *every == 0 {
+                    checkpoints.push(Checkpoint {
+                        step: index,
+                        x: step.x_prev.to_vec(),
+                        v: step.v_prev.to_vec(),
+                        time: step.time,
+                    });
+                }
+                inputs.push(StepInputs {
+                    targets: step.targets.map(<[Vec3]>::to_vec),
+                    forces: step.forces.map(<[Vec3]>::to_vec),
+                });
+            }
+        }
+    }
+
+    /// The full records (empty for a checkpointed tape).
+    pub fn records(&self) -> &[StepRecord] {
+        match self {
+            Self::Full { records } => records,
+            Self::Checkpointed { .. } => &[],
+        }
+    }
+
     /// Memory held by the tape in bytes.
     pub fn bytes(&self) -> usize {
         let v = std::mem::size_of::<Vec3>();
-        let checkpoints: usize = self
-            .checkpoints
-            .iter()
-            .map(|c| std::mem::size_of::<Checkpoint>() + v * (c.x.len() + c.v.len()))
-            .sum();
-        let inputs: usize = self
-            .inputs
-            .iter()
-            .map(|i| {
-                std::mem::size_of::<StepInputs>()
-                    + v * (i.targets.as_ref().map_or(0, Vec::len)
-                        + i.forces.as_ref().map_or(0, Vec::len))
-            })
-            .sum();
-        self.records.iter().map(StepRecord::bytes).sum::<usize>() + checkpoints + inputs
+        match self {
+            Self::Full { records } => records.iter().map(StepRecord::bytes).sum(),
+            Self::Checkpointed {
+                checkpoints,
+                inputs,
+                ..
+            } => {
+                let states: usize = checkpoints
+                    .iter()
+                    .map(|c| std::mem::size_of::<Checkpoint>() + v * (c.x.len() + c.v.len()))
+                    .sum();
+                let inputs: usize = inputs
+                    .iter()
+                    .map(|i| {
+                        std::mem::size_of::<StepInputs>()
+                            + v * (i.targets.as_ref().map_or(0, Vec::len)
+                                + i.forces.as_ref().map_or(0, Vec::len))
+                    })
+                    .sum();
+                states + inputs
+            }
+        }
     }
 }

@@ -661,7 +661,7 @@ max_iterations = 300
     let slips: usize = sim
         .tape()
         .unwrap()
-        .records
+        .records()
         .iter()
         .map(|r| {
             r.contacts
@@ -750,6 +750,35 @@ fn checkpointed_and_full_tapes_give_identical_gradients() {
     );
 }
 
+/// Regression (restructure issue): `reset()` cleared only a full tape's records, so a
+/// checkpointed recording of 5 steps, `reset()`, then 3 steps left a tape of 8 steps and
+/// backward asked for 8 rows of `dl_dx` and replayed the stale steps. Now both modes clear,
+/// and the gradients equal those of a fresh 3-step recording.
+#[test]
+fn reset_clears_a_checkpointed_tape() {
+    let mut sim = Simulator::from_toml_file(&configs_dir().join("slope.toml")).unwrap();
+    let n = sim.num_nodes();
+    let w: Vec<Vec<Vec3>> = (0..3).map(|k| random_vectors(n, 1.0, 900 + k)).collect();
+    let three_steps = |sim: &mut Simulator| {
+        for _ in 0..3 {
+            sim.step(StepInput::default()).unwrap();
+        }
+        assert_eq!(sim.tape().unwrap().len(), 3);
+        sim.backward(&w, &[], &BackwardOptions::default()).unwrap()
+    };
+    sim.set_recording_checkpointed(2);
+    for _ in 0..5 {
+        sim.step(StepInput::default()).unwrap();
+    }
+    sim.reset(None, None).unwrap();
+    let after_reset = three_steps(&mut sim);
+    sim.set_recording_checkpointed(2);
+    sim.reset(None, None).unwrap();
+    let fresh = three_steps(&mut sim);
+    assert_eq!(after_reset.v0, fresh.v0);
+    assert_eq!(after_reset.x0, fresh.x0);
+}
+
 /// The sock: a closed tube with a heel bend (curved rest shape), held at its four rim handles.
 #[test]
 fn gradients_match_finite_differences_on_the_sock() {
@@ -827,7 +856,7 @@ fn gradients_through_coupled_contacts_match_finite_differences() {
         b: vec![vec![Vec3::zeros(); n]; steps],
     };
     run(&mut sim, &base, &loss, true);
-    let coupled = sim.tape().unwrap().records.iter().any(|r| {
+    let coupled = sim.tape().unwrap().records().iter().any(|r| {
         let mut count = vec![0; n];
         for c in r
             .contacts
@@ -890,7 +919,7 @@ fn gradients_through_a_loop_of_sticking_contacts_match_finite_differences() {
     REDUNDANT_CONTACTS.with(|c| c.set(false));
     run(&mut sim, &base, &loss, true);
     let pushing = |c: &&diffcloth::Contact| c.branch != diffcloth::Branch::TakeOff;
-    let looped = sim.tape().unwrap().records.iter().any(|r| {
+    let looped = sim.tape().unwrap().records().iter().any(|r| {
         let floor: Vec<usize> = r
             .contacts
             .iter()
