@@ -1,4 +1,4 @@
-//! Adjoint of the recorded steps (paper Sec. 4, Eqns. 13-30), without contact so far.
+//! Adjoint of the recorded steps (paper Sec. 4, Eqns. 13-30), contact included (Sec. 4.2).
 //!
 //! Step n solves `g(x_{n+1}) = M (x_{n+1} - y) / h^2 + grad W(x_{n+1}) = 0` with
 //! `y = x_n + h v_n + h^2 M^{-1} f` and `v_{n+1} = (x_{n+1} - x_n) / h`. Its Jacobian is
@@ -8,7 +8,7 @@
 //! parameter theta gets `-z . dg/dtheta`.
 
 use crate::contact::{Branch, ContactKind};
-use crate::energy::{stretch_projection_jacobian as stretch_jacobian, Bend, Stretch};
+use crate::energy::Stiffness;
 use crate::error::{Error, Result};
 use crate::forward::Simulator;
 use crate::linalg::SpdFactor;
@@ -143,73 +143,32 @@ struct Resume {
 /// in the target gradients, 1e-10 gives 0.02 %).
 pub const TRUSTED_FORWARD_RESIDUAL: f64 = 1e-9;
 
-/// The linearization of one step at its end state: per-constraint projection Jacobians.
+/// The linearization of one step at its end state: each constraint set's weighted projection
+/// Jacobians, in the set's own layout (see [`PdConstraints::linearize`]).
 struct Linearization {
-    /// Per triangle: its weight times its projection Jacobian.
-    stretch: Vec<[[f64; 6]; 6]>,
-    /// Per bending constraint: its weight times its projection Jacobian.
-    bend: Vec<Matrix3<f64>>,
-    /// Per bending constraint: the sum of its stencil coefficients (the center's).
-    bend_coef_sum: Vec<f64>,
+    per_set: Vec<Vec<f64>>,
 }
 
 impl Linearization {
     fn new(sim: &Simulator) -> Self {
         Self {
-            stretch: vec![[[0.0; 6]; 6]; sim.stretch().map_or(0, Stretch::len)],
-            bend: vec![Matrix3::zeros(); sim.bend().map_or(0, Bend::len)],
-            bend_coef_sum: sim.bend().map_or_else(Vec::new, |b| {
-                (0..b.len()).map(|i| b.stencil(i).1.iter().sum()).collect()
-            }),
+            per_set: sim
+                .constraint_sets()
+                .map(|c| vec![0.0; c.linearization_len()])
+                .collect(),
         }
     }
 
     fn update(&mut self, sim: &Simulator, x: &[Vec3]) {
-        if let Some(s) = sim.stretch() {
-            let (lo, hi) = s.strain_limits();
-            for (t, j) in self.stretch.iter_mut().enumerate() {
-                *j = stretch_jacobian(&s.deformation_gradient(t, x), lo, hi);
-                let w = s.weight(t);
-                j.iter_mut().flatten().for_each(|e| *e *= w);
-            }
-        }
-        if let Some(b) = sim.bend() {
-            for (i, j) in self.bend.iter_mut().enumerate() {
-                *j = b.weight(i) * b.projection_jacobian(i, x);
-            }
+        for (c, lin) in sim.constraint_sets().zip(&mut self.per_set) {
+            c.linearize(x, lin);
         }
     }
 
     /// `out -= dP v`, constraint by constraint (never assembled for the iterative solvers).
     fn sub_dp(&self, sim: &Simulator, v: &[Vec3], out: &mut [Vec3]) {
-        if let Some(s) = sim.stretch() {
-            for ((tri, b), j) in s.triangles().iter().zip(s.shapes()).zip(&self.stretch) {
-                // dF = [v] B (3x2, columns f0 and f1); q = (w J) vec(dF); out -= q B^T.
-                let [va, vb, vc] = tri.map(|k| v[k]);
-                let f0 = va * b[0][0] + vb * b[1][0] + vc * b[2][0];
-                let f1 = va * b[0][1] + vb * b[1][1] + vc * b[2][1];
-                let df = [f0.x, f0.y, f0.z, f1.x, f1.y, f1.z];
-                let q: [f64; 6] = std::array::from_fn(|r| (0..6).map(|k| j[r][k] * df[k]).sum());
-                let (q0, q1) = (Vec3::new(q[0], q[1], q[2]), Vec3::new(q[3], q[4], q[5]));
-                for (l, &k) in tri.iter().enumerate() {
-                    out[k] -= q0 * b[l][0] + q1 * b[l][1];
-                }
-            }
-        }
-        if let Some(bend) = sim.bend() {
-            for (i, &center) in bend.centers().iter().enumerate() {
-                let (nbrs, coefs) = bend.stencil(i);
-                let coef_sum = self.bend_coef_sum[i];
-                let mut dv = -coef_sum * v[center];
-                for (&j, &c) in nbrs.iter().zip(coefs) {
-                    dv += c * v[j];
-                }
-                let q = self.bend[i] * dv;
-                for (&j, &c) in nbrs.iter().zip(coefs) {
-                    out[j] -= c * q;
-                }
-                out[center] += coef_sum * q;
-            }
+        for (c, lin) in sim.constraint_sets().zip(&self.per_set) {
+            c.sub_dp(lin, v, out);
         }
     }
 
@@ -228,45 +187,11 @@ impl Linearization {
                 }
             }
         }
-        if let Some(s) = sim.stretch() {
-            for (k, tri) in s.triangles().iter().enumerate() {
-                let (b, j) = (s.shape(k), &self.stretch[k]);
-                for l in 0..3 {
-                    for m in 0..3 {
-                        for c in 0..3 {
-                            for e in 0..3 {
-                                let mut val = 0.0;
-                                for kk in 0..2 {
-                                    for mm in 0..2 {
-                                        val += b[l][kk] * j[c + 3 * kk][e + 3 * mm] * b[m][mm];
-                                    }
-                                }
-                                t.push(Triplet::new(3 * tri[l] + c, 3 * tri[m] + e, -val));
-                            }
-                        }
-                    }
-                }
-            }
+        let mut neg_dp = Vec::new();
+        for (c, lin) in sim.constraint_sets().zip(&self.per_set) {
+            c.add_neg_dp_triplets(lin, &mut neg_dp);
         }
-        if let Some(bend) = sim.bend() {
-            for (i, &center) in bend.centers().iter().enumerate() {
-                let (nbrs, coefs) = bend.stencil(i);
-                let center_coef: f64 = -coefs.iter().sum::<f64>();
-                let nodes: Vec<(usize, f64)> = std::iter::once((center, center_coef))
-                    .chain(nbrs.iter().copied().zip(coefs.iter().copied()))
-                    .collect();
-                let jw = self.bend[i];
-                for &(a, ca) in &nodes {
-                    for &(b, cb) in &nodes {
-                        for c in 0..3 {
-                            for e in 0..3 {
-                                t.push(Triplet::new(3 * a + c, 3 * b + e, -ca * cb * jw[(c, e)]));
-                            }
-                        }
-                    }
-                }
-            }
-        }
+        t.extend(neg_dp.into_iter().map(|(r, c, v)| Triplet::new(r, c, v)));
         t
     }
 }
@@ -1335,28 +1260,14 @@ impl Simulator {
                 .map(|(&j, t)| zf[j].dot(&(x[j] - t)))
                 .sum::<f64>();
         }
-        if let Some(s) = self.stretch() {
-            let (lo, hi) = s.strain_limits();
-            let mut dot = 0.0;
-            for (t, tri) in s.triangles().iter().enumerate() {
-                let f = s.deformation_gradient(t, x);
-                let r = (f - crate::energy::project_singular_values(&f, lo, hi)) * s.rest_area(t);
-                for l in 0..3 {
-                    dot += zf[tri[l]].dot(&(r * s.shape(t)[l]));
-                }
+        for c in self.constraint_sets() {
+            let dot = c.stiffness_dot(x, &zf);
+            match c.stiffness() {
+                Stiffness::Stretch => grads.k_stretch -= dot,
+                Stiffness::Bend => grads.k_bend -= dot,
+                // k_attach goes with the actions above, at the recorded targets.
+                Stiffness::Attach => {}
             }
-            grads.k_stretch -= dot;
-        }
-        if let Some(b) = self.bend() {
-            let mut dot = 0.0;
-            for (i, &center) in b.centers().iter().enumerate() {
-                let r = (b.curvature(i, x) - b.projection(i, x)) * b.area(i);
-                let (nbrs, coefs) = b.stencil(i);
-                for (&j, &c) in nbrs.iter().zip(coefs) {
-                    dot += c * (zf[j] - zf[center]).dot(&r);
-                }
-            }
-            grads.k_bend -= dot;
         }
         let mass = self.masses();
         for i in 0..n {

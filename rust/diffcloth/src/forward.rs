@@ -9,7 +9,7 @@ use crate::delassus::Delassus;
 
 use crate::contact::{BranchCounts, Contact, ContactSet, ContactSettings};
 use crate::effects::Effects;
-use crate::energy::{Attachments, Bend, PdConstraints, Stretch};
+use crate::energy::{Attachments, Bend, PdConstraints, Stiffness, Stretch};
 use crate::error::{Error, Result};
 use crate::forces::Wind;
 use crate::linalg::SpdFactor;
@@ -277,7 +277,15 @@ impl Simulator {
         Self::new(&SceneConfig::from_toml_file(path)?)
     }
 
-    fn constraint_sets(&mut self) -> impl Iterator<Item = &mut dyn PdConstraints> {
+    /// Every constraint set the scene simulates, in a fixed order.
+    pub(crate) fn constraint_sets(&self) -> impl Iterator<Item = &dyn PdConstraints> {
+        let s = self.stretch.as_ref().map(|c| c as &dyn PdConstraints);
+        let b = self.bend.as_ref().map(|c| c as &dyn PdConstraints);
+        let a = self.attachments.as_ref().map(|c| c as &dyn PdConstraints);
+        [s, b, a].into_iter().flatten()
+    }
+
+    fn constraint_sets_mut(&mut self) -> impl Iterator<Item = &mut dyn PdConstraints> {
         let s = self.stretch.as_mut().map(|c| c as &mut dyn PdConstraints);
         let b = self.bend.as_mut().map(|c| c as &mut dyn PdConstraints);
         let a = self
@@ -497,14 +505,12 @@ impl Simulator {
             .iter_mut()
             .zip(&self.node_area)
             .for_each(|(m, a)| *m = p.density * a);
-        if let Some(s) = self.stretch.as_mut() {
-            s.set_stiffness(p.k_stretch);
-        }
-        if let Some(b) = self.bend.as_mut() {
-            b.set_stiffness(p.k_bend);
-        }
-        if let Some(a) = self.attachments.as_mut() {
-            a.set_stiffness(p.k_attach);
+        for c in self.constraint_sets_mut() {
+            c.set_stiffness(match c.stiffness() {
+                Stiffness::Stretch => p.k_stretch,
+                Stiffness::Bend => p.k_bend,
+                Stiffness::Attach => p.k_attach,
+            });
         }
     }
 
@@ -750,7 +756,7 @@ impl Simulator {
             .map(|((xi, yi), m)| m * (xi - yi).norm_squared())
             .sum::<f64>()
             * inv_2h2;
-        for c in self.constraint_sets() {
+        for c in self.constraint_sets_mut() {
             energy += c.project(&x, parallel);
             c.add_rhs(&mut rhs);
         }
@@ -1036,7 +1042,7 @@ impl Simulator {
             0.0
         };
         let x = self.x.clone();
-        let elastic: f64 = self.constraint_sets().map(|c| c.project(&x, false)).sum();
+        let elastic: f64 = self.constraint_sets_mut().map(|c| c.project(&x, false)).sum();
         kinetic + potential + elastic
     }
 }

@@ -2,7 +2,7 @@
 //! (the end effectors). `A_i` selects node `j_i`; the projection is the target `t_i`;
 //! `w_i = k_attach`. Targets enter only the right-hand side, so moving them never refactors.
 
-use super::PdConstraints;
+use super::{PdConstraints, Stiffness};
 use crate::Vec3;
 
 pub struct Attachments {
@@ -58,6 +58,34 @@ impl PdConstraints for Attachments {
             rhs[j] += self.stiffness * t;
         }
     }
+
+    fn stiffness(&self) -> Stiffness {
+        Stiffness::Attach
+    }
+
+    fn set_stiffness(&mut self, k: f64) {
+        self.stiffness = k;
+    }
+
+    /// The projection (the target) does not depend on x: dP = 0.
+    fn linearization_len(&self) -> usize {
+        0
+    }
+
+    fn linearize(&self, _x: &[Vec3], _lin: &mut [f64]) {}
+
+    fn sub_dp(&self, _lin: &[f64], _v: &[Vec3], _out: &mut [Vec3]) {}
+
+    fn add_neg_dp_triplets(&self, _lin: &[f64], _out: &mut Vec<(usize, usize, f64)>) {}
+
+    /// `grad W = k (x_j - t)` on each attached node, at the current targets.
+    fn stiffness_dot(&self, x: &[Vec3], z: &[Vec3]) -> f64 {
+        self.nodes
+            .iter()
+            .zip(&self.targets)
+            .map(|(&j, t)| z[j].dot(&(x[j] - t)))
+            .sum()
+    }
 }
 
 #[cfg(test)]
@@ -74,6 +102,7 @@ mod tests {
             vec![Vec3::new(1.0, 2.0, 3.0), Vec3::zeros()],
         );
         check_gradient_fd(&mut a, &x, 1e-7);
+        check_backward_fd(&mut a, 50.0, &x, 1e-6);
         // The projection is the target: zero energy there.
         let mut at = x.clone();
         at[1] = Vec3::new(1.0, 2.0, 3.0);

@@ -8,7 +8,8 @@
 //! (Meyer et al. 2003), which makes `A_i x` the mean-curvature normal `2 H n` on any valence.
 //! Boundary vertices carry no constraint: their Laplacian is not a curvature.
 
-use super::{PdConstraints, PARALLEL_MIN_CONSTRAINTS};
+use super::{PdConstraints, Stiffness, PARALLEL_MIN_CONSTRAINTS};
+use nalgebra::Matrix3;
 use crate::mesh::TriMesh;
 use crate::Vec3;
 use rayon::prelude::*;
@@ -20,6 +21,8 @@ pub struct Bend {
     offsets: Vec<usize>,
     neighbor: Vec<usize>,
     coef: Vec<f64>,
+    /// Per constraint: `sum_j c_ij` (minus the center's coefficient; the adjoint's hot loop).
+    coef_sum: Vec<f64>,
     area: Vec<f64>,
     weight: Vec<f64>,
     rest_length: Vec<f64>,
@@ -57,6 +60,7 @@ impl Bend {
             offsets: vec![0],
             neighbor: Vec::new(),
             coef: Vec::new(),
+            coef_sum: Vec::new(),
             area: Vec::new(),
             weight: Vec::new(),
             rest_length: Vec::new(),
@@ -73,6 +77,8 @@ impl Bend {
                 b.coef.push(w / area);
                 lap += *b.coef.last().unwrap() * (x[j] - x[i]);
             }
+            b.coef_sum
+                .push(b.coef[b.offsets[b.offsets.len() - 1]..].iter().sum());
             b.offsets.push(b.neighbor.len());
             b.center.push(i);
             b.area.push(area);
@@ -91,12 +97,6 @@ impl Bend {
         b.energy = vec![0.0; b.center.len()];
         b.set_stiffness(k_bend);
         b
-    }
-
-    pub fn set_stiffness(&mut self, k_bend: f64) {
-        for (w, a) in self.weight.iter_mut().zip(&self.area) {
-            *w = k_bend * a;
-        }
     }
 
     pub fn len(&self) -> usize {
@@ -226,6 +226,78 @@ impl PdConstraints for Bend {
             rhs[self.center[i]] += center;
         }
     }
+
+    fn stiffness(&self) -> Stiffness {
+        Stiffness::Bend
+    }
+
+    fn set_stiffness(&mut self, k_bend: f64) {
+        for (w, a) in self.weight.iter_mut().zip(&self.area) {
+            *w = k_bend * a;
+        }
+    }
+
+    fn linearization_len(&self) -> usize {
+        9 * self.len()
+    }
+
+    /// Per constraint, `w dp/dv` (3x3, column-major as nalgebra stores it).
+    fn linearize(&self, x: &[Vec3], lin: &mut [f64]) {
+        for (i, out) in lin.chunks_exact_mut(9).enumerate() {
+            let j = self.weight[i] * self.projection_jacobian(i, x);
+            out.copy_from_slice(j.as_slice());
+        }
+    }
+
+    fn sub_dp(&self, lin: &[f64], v: &[Vec3], out: &mut [Vec3]) {
+        for (i, j) in lin.chunks_exact(9).enumerate() {
+            let (nbrs, coefs) = self.stencil(i);
+            let center = self.center[i];
+            let coef_sum = self.coef_sum[i];
+            let mut dv = -coef_sum * v[center];
+            for (&k, &c) in nbrs.iter().zip(coefs) {
+                dv += c * v[k];
+            }
+            let q = Matrix3::from_column_slice(j) * dv;
+            for (&k, &c) in nbrs.iter().zip(coefs) {
+                out[k] -= c * q;
+            }
+            out[center] += coef_sum * q;
+        }
+    }
+
+    fn add_neg_dp_triplets(&self, lin: &[f64], out: &mut Vec<(usize, usize, f64)>) {
+        for (i, j) in lin.chunks_exact(9).enumerate() {
+            let (nbrs, coefs) = self.stencil(i);
+            let center_coef: f64 = -coefs.iter().sum::<f64>();
+            let nodes: Vec<(usize, f64)> = std::iter::once((self.center[i], center_coef))
+                .chain(nbrs.iter().copied().zip(coefs.iter().copied()))
+                .collect();
+            let jw = Matrix3::from_column_slice(j);
+            for &(a, ca) in &nodes {
+                for &(b, cb) in &nodes {
+                    for c in 0..3 {
+                        for e in 0..3 {
+                            out.push((3 * a + c, 3 * b + e, -ca * cb * jw[(c, e)]));
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// `grad W` on neighbour j is `k a_i c_ij (A_i x - p_i)` (minus their sum on the center).
+    fn stiffness_dot(&self, x: &[Vec3], z: &[Vec3]) -> f64 {
+        let mut dot = 0.0;
+        for (i, &center) in self.center.iter().enumerate() {
+            let r = (self.curvature(i, x) - self.projection(i, x)) * self.area[i];
+            let (nbrs, coefs) = self.stencil(i);
+            for (&j, &c) in nbrs.iter().zip(coefs) {
+                dot += c * (z[j] - z[center]).dot(&r);
+            }
+        }
+        dot
+    }
 }
 
 /// Mixed Voronoi area per vertex (Meyer et al. 2003): the Voronoi region inside non-obtuse
@@ -350,5 +422,7 @@ mod tests {
         let flat = grid(5, 5, 1.0, 1.0, GridPlane::Xz).unwrap();
         let xf = jitter(&flat.positions, 0.05, 4);
         check_gradient_fd(&mut Bend::new(&flat, 2.0), &xf, 1e-6);
+        check_backward_fd(&mut Bend::new(&m, 2.0), 2.0, &x, 1e-5);
+        check_backward_fd(&mut Bend::new(&flat, 2.0), 2.0, &xf, 1e-5);
     }
 }

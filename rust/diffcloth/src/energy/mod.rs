@@ -4,6 +4,10 @@
 //!
 //! A constraint set contributes `sum_i w_i A_i^T A_i` to the scalar system matrix once, and
 //! each local step contributes `sum_i w_i A_i^T p_i` to the right-hand side.
+//!
+//! Each set also owns its backward half (paper Eqn. 29): the Jacobian of its elastic force is
+//! `K - dP` with `dP = sum_i A_i^T (w_i dp_i/d(A_i x)) A_i`, and its weights scale with one
+//! stiffness parameter, so the adjoint needs no per-energy code.
 
 mod attachment;
 mod bend;
@@ -11,9 +15,7 @@ mod stretch;
 
 pub use attachment::Attachments;
 pub use bend::Bend;
-pub use stretch::{
-    project_singular_values, projection_jacobian as stretch_projection_jacobian, Stretch,
-};
+pub use stretch::Stretch;
 
 use crate::Vec3;
 
@@ -31,6 +33,34 @@ pub trait PdConstraints: Send + Sync {
     fn project(&mut self, x: &[Vec3], parallel: bool) -> f64;
     /// Adds `sum_i w_i A_i^T p_i` of the stored projections to `rhs`.
     fn add_rhs(&self, rhs: &mut [Vec3]);
+
+    /// The stiffness parameter the weights are proportional to.
+    fn stiffness(&self) -> Stiffness;
+    /// Sets that stiffness (the weights scale with it; the caller refactors).
+    fn set_stiffness(&mut self, k: f64);
+
+    // ---- backward half ----------------------------------------------------------------
+
+    /// Floats [`PdConstraints::linearize`] writes (per-constraint weighted projection
+    /// Jacobians).
+    fn linearization_len(&self) -> usize;
+    /// Writes `w_i dp_i/d(A_i x)` of every constraint at `x` into `lin`.
+    fn linearize(&self, x: &[Vec3], lin: &mut [f64]);
+    /// `out -= dP v` from a linearization (matrix-free: never assembled for Krylov solves).
+    fn sub_dp(&self, lin: &[f64], v: &[Vec3], out: &mut [Vec3]);
+    /// Appends `-dP` as triplets of the 3m x 3m node-major matrix (row `3 node + coordinate`),
+    /// for the direct adjoint solve.
+    fn add_neg_dp_triplets(&self, lin: &[f64], out: &mut Vec<(usize, usize, f64)>);
+    /// `z . d(grad W)/dk` at `x`: the stiffness gradient is `-` this summed over steps.
+    fn stiffness_dot(&self, x: &[Vec3], z: &[Vec3]) -> f64;
+}
+
+/// Which physical parameter scales a constraint set's weights.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stiffness {
+    Stretch,
+    Bend,
+    Attach,
 }
 
 #[cfg(test)]
@@ -83,6 +113,62 @@ pub(crate) mod testing {
                 );
             }
         }
+    }
+
+    /// Checks the backward half against finite differences of the elastic force: along `v`,
+    /// `d(grad W)/dx v = K v - dP v`; the triplets of `-dP` give the same product as
+    /// `sub_dp`; and `stiffness_dot` is `z . d(grad W)/dk` (central differences in k).
+    pub fn check_backward_fd(c: &mut dyn PdConstraints, k: f64, x: &[Vec3], tol: f64) {
+        let n = x.len();
+        let v = jitter(&vec![Vec3::zeros(); n], 1.0, 77);
+        let mut lin = vec![0.0; c.linearization_len()];
+        c.linearize(x, &mut lin);
+        let mut analytic = apply_system(c, &v);
+        c.sub_dp(&lin, &v, &mut analytic);
+        let eps = 1e-6;
+        let shifted = |c: &mut dyn PdConstraints, s: f64| {
+            let xs: Vec<Vec3> = x.iter().zip(&v).map(|(a, b)| a + s * b).collect();
+            gradient(c, &xs).1
+        };
+        let (gp, gm) = (shifted(c, eps), shifted(c, -eps));
+        let scale = analytic.iter().map(|a| a.amax()).fold(1e-8, f64::max);
+        for i in 0..n {
+            let fd = (gp[i] - gm[i]) / (2.0 * eps);
+            assert!(
+                (fd - analytic[i]).amax() <= tol * scale,
+                "d(grad W) v at node {i}: analytic {analytic:?} vs fd {fd:?}",
+                analytic = analytic[i]
+            );
+        }
+        // The assembled -dP agrees with the matrix-free product.
+        let mut t = Vec::new();
+        c.add_neg_dp_triplets(&lin, &mut t);
+        let mut assembled = vec![Vec3::zeros(); n];
+        for (r, col, val) in t {
+            assembled[r / 3][r % 3] -= val * v[col / 3][col % 3];
+        }
+        let mut free = vec![Vec3::zeros(); n];
+        c.sub_dp(&lin, &v, &mut free);
+        for i in 0..n {
+            assert!(
+                (assembled[i] + free[i]).amax() <= 1e-12 * scale.max(1.0),
+                "assembled dP differs from sub_dp at node {i}"
+            );
+        }
+        // Stiffness: d(grad W)/dk by central differences.
+        let z = jitter(&vec![Vec3::zeros(); n], 1.0, 78);
+        let dot = c.stiffness_dot(x, &z);
+        let dk = 1e-6 * k.abs().max(1.0);
+        c.set_stiffness(k + dk);
+        let gp = gradient(c, x).1;
+        c.set_stiffness(k - dk);
+        let gm = gradient(c, x).1;
+        c.set_stiffness(k);
+        let fd: f64 = (0..n).map(|i| z[i].dot(&(gp[i] - gm[i]))).sum::<f64>() / (2.0 * dk);
+        assert!(
+            (fd - dot).abs() <= tol * dot.abs().max(1e-8),
+            "stiffness_dot {dot} vs fd {fd}"
+        );
     }
 
     /// A deterministic pseudo-random perturbation in [-amp, amp].

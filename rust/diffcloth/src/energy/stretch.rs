@@ -4,7 +4,7 @@
 //! triangle's own 2D frame. The projection is `U clamp(Sigma, s_min, s_max) V^T`
 //! (as-rigid-as-possible for `s_min = s_max = 1`), and `w_i = k_stretch * rest area`.
 
-use super::{PdConstraints, PARALLEL_MIN_CONSTRAINTS};
+use super::{PdConstraints, Stiffness, PARALLEL_MIN_CONSTRAINTS};
 use crate::mesh::TriMesh;
 use crate::Vec3;
 use nalgebra::{Matrix2, Matrix3x2, Vector2};
@@ -60,12 +60,6 @@ impl Stretch {
         };
         s.set_stiffness(k_stretch);
         s
-    }
-
-    pub fn set_stiffness(&mut self, k_stretch: f64) {
-        for (w, a) in self.weight.iter_mut().zip(&self.rest_area) {
-            *w = k_stretch * a;
-        }
     }
 
     pub fn len(&self) -> usize {
@@ -157,7 +151,88 @@ impl PdConstraints for Stretch {
             }
         }
     }
+
+    fn stiffness(&self) -> Stiffness {
+        Stiffness::Stretch
+    }
+
+    fn set_stiffness(&mut self, k_stretch: f64) {
+        for (w, a) in self.weight.iter_mut().zip(&self.rest_area) {
+            *w = k_stretch * a;
+        }
+    }
+
+    fn linearization_len(&self) -> usize {
+        JACOBIAN_LEN * self.len()
+    }
+
+    /// Per triangle, `w dP/dF` (6x6, row-major, on F flattened column by column).
+    fn linearize(&self, x: &[Vec3], lin: &mut [f64]) {
+        let (lo, hi) = (self.strain_min, self.strain_max);
+        for (t, out) in lin.chunks_exact_mut(JACOBIAN_LEN).enumerate() {
+            let j = projection_jacobian(&self.deformation_gradient(t, x), lo, hi);
+            let w = self.weight[t];
+            for (o, e) in out.iter_mut().zip(j.iter().flatten()) {
+                *o = w * e;
+            }
+        }
+    }
+
+    fn sub_dp(&self, lin: &[f64], v: &[Vec3], out: &mut [Vec3]) {
+        let rows = self.triangles.iter().zip(&self.shape);
+        for ((tri, b), j) in rows.zip(lin.chunks_exact(JACOBIAN_LEN)) {
+            // dF = [v] B (3x2, columns f0 and f1); q = (w J) vec(dF); out -= q B^T.
+            let [va, vb, vc] = tri.map(|k| v[k]);
+            let f0 = va * b[0][0] + vb * b[1][0] + vc * b[2][0];
+            let f1 = va * b[0][1] + vb * b[1][1] + vc * b[2][1];
+            let df = [f0.x, f0.y, f0.z, f1.x, f1.y, f1.z];
+            let q: [f64; 6] =
+                std::array::from_fn(|r| (0..6).map(|k| j[6 * r + k] * df[k]).sum());
+            let (q0, q1) = (Vec3::new(q[0], q[1], q[2]), Vec3::new(q[3], q[4], q[5]));
+            for (l, &k) in tri.iter().enumerate() {
+                out[k] -= q0 * b[l][0] + q1 * b[l][1];
+            }
+        }
+    }
+
+    fn add_neg_dp_triplets(&self, lin: &[f64], out: &mut Vec<(usize, usize, f64)>) {
+        let rows = self.triangles.iter().zip(&self.shape);
+        for ((tri, b), j) in rows.zip(lin.chunks_exact(JACOBIAN_LEN)) {
+            for l in 0..3 {
+                for m in 0..3 {
+                    for c in 0..3 {
+                        for e in 0..3 {
+                            let mut val = 0.0;
+                            for kk in 0..2 {
+                                for mm in 0..2 {
+                                    val += b[l][kk] * j[6 * (c + 3 * kk) + e + 3 * mm] * b[m][mm];
+                                }
+                            }
+                            out.push((3 * tri[l] + c, 3 * tri[m] + e, -val));
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// `grad W = sum_t k a_t (F - P(F)) b_l` per corner, so d/dk drops the k.
+    fn stiffness_dot(&self, x: &[Vec3], z: &[Vec3]) -> f64 {
+        let (lo, hi) = (self.strain_min, self.strain_max);
+        let mut dot = 0.0;
+        for (t, tri) in self.triangles.iter().enumerate() {
+            let f = self.deformation_gradient(t, x);
+            let r = (f - project_singular_values(&f, lo, hi)) * self.rest_area[t];
+            for l in 0..3 {
+                dot += z[tri[l]].dot(&(r * self.shape[t][l]));
+            }
+        }
+        dot
+    }
 }
+
+/// Floats of one triangle's weighted projection Jacobian (6x6).
+const JACOBIAN_LEN: usize = 36;
 
 /// Singular values `s1 >= s2 >= 0` and right singular vectors of a 3x2 matrix, in closed form
 /// from the 2x2 eigenproblem of `F^T F = [[a, b], [b, c]]` (no trigonometry: this runs once per
@@ -453,6 +528,8 @@ mod tests {
         check_gradient_fd(&mut arap, &x, 1e-6);
         let mut limited = Stretch::new(&mesh, 30.0, 0.95, 1.05);
         check_gradient_fd(&mut limited, &x, 1e-6);
+        check_backward_fd(&mut arap, 100.0, &x, 1e-5);
+        check_backward_fd(&mut limited, 100.0, &x, 1e-5);
         // Translation invariance: the selector rows sum to zero (momentum conservation).
         let shifted: Vec<Vec3> = x.iter().map(|p| p + Vec3::new(3.0, -1.0, 2.0)).collect();
         let (e0, _) = gradient(&mut arap, &x);
