@@ -9,7 +9,7 @@ use crate::delassus::Delassus;
 
 use crate::contact::{BranchCounts, Contact, ContactSet, ContactSettings};
 use crate::effects::Effects;
-use crate::energy::{Attachments, Bend, PdConstraints, Stiffness, Stretch};
+use crate::energy::{bending, Attachments, PdConstraints, Stiffness, Stretch};
 use crate::error::{Error, Result};
 use crate::forces::Wind;
 use crate::linalg::SpdFactor;
@@ -92,7 +92,8 @@ pub struct Simulator {
     node_area: Vec<f64>,
     mass: Vec<f64>,
     stretch: Option<Stretch>,
-    bend: Option<Bend>,
+    /// The bending model the scene selects (see `energy::bending`).
+    bend: Option<Box<dyn PdConstraints>>,
     attachments: Option<Attachments>,
     wind: Option<Wind>,
     obstacles: Vec<Obstacle>,
@@ -177,7 +178,7 @@ impl Simulator {
         let stretch = effects
             .stretch
             .then(|| Stretch::new(&mesh, params.k_stretch, lo, hi));
-        let bend = effects.bend.then(|| Bend::new(&mesh, params.k_bend));
+        let bend = effects.bend.then(|| bending(&mesh, params.k_bend));
         let attachments = match (&config.attachments, effects.attachments) {
             (Some(a), true) => {
                 let nodes = attachment_nodes(a, &placed)?;
@@ -280,14 +281,14 @@ impl Simulator {
     /// Every constraint set the scene simulates, in a fixed order.
     pub(crate) fn constraint_sets(&self) -> impl Iterator<Item = &dyn PdConstraints> {
         let s = self.stretch.as_ref().map(|c| c as &dyn PdConstraints);
-        let b = self.bend.as_ref().map(|c| c as &dyn PdConstraints);
+        let b = self.bend.as_deref();
         let a = self.attachments.as_ref().map(|c| c as &dyn PdConstraints);
         [s, b, a].into_iter().flatten()
     }
 
     fn constraint_sets_mut(&mut self) -> impl Iterator<Item = &mut dyn PdConstraints> {
         let s = self.stretch.as_mut().map(|c| c as &mut dyn PdConstraints);
-        let b = self.bend.as_mut().map(|c| c as &mut dyn PdConstraints);
+        let b = self.bend.as_deref_mut().map(|c| c as &mut dyn PdConstraints);
         let a = self
             .attachments
             .as_mut()
@@ -364,8 +365,8 @@ impl Simulator {
     pub fn stretch(&self) -> Option<&Stretch> {
         self.stretch.as_ref()
     }
-    pub fn bend(&self) -> Option<&Bend> {
-        self.bend.as_ref()
+    pub fn bend(&self) -> Option<&dyn PdConstraints> {
+        self.bend.as_deref()
     }
     pub fn wind(&self) -> Option<&Wind> {
         self.wind.as_ref()

@@ -17,7 +17,13 @@ pub use attachment::Attachments;
 pub use bend::Bend;
 pub use stretch::Stretch;
 
+use crate::mesh::TriMesh;
 use crate::Vec3;
+
+/// The bending constraints of a mesh (today the per-vertex model, [`Bend`]).
+pub fn bending(mesh: &TriMesh, k_bend: f64) -> Box<dyn PdConstraints> {
+    Box::new(Bend::new(mesh, k_bend))
+}
 
 /// Constraint sets below this size are projected on one thread: rayon's fork/join overhead
 /// (a few microseconds) exceeds the work.
