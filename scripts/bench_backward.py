@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from diffcloth_gym import Simulator  # noqa: E402
 from diffcloth_gym.bench import results  # noqa: E402
 from diffcloth_gym.bench.scene_utils import contact_free  # noqa: E402
-from diffcloth_gym.simulator import CONFIG_DIR  # noqa: E402
+from diffcloth_gym.scenes import CONFIG_DIR  # noqa: E402
 
 
 def load(name):

@@ -2,35 +2,17 @@
 
 from __future__ import annotations
 
-import copy
-import tomllib
-
 import numpy as np
 
-from diffcloth_gym.simulator import CONFIG_DIR
+from diffcloth_gym.scenes import contact_free
+from diffcloth_gym.scenes import load_scene as _load_scene
 
-#: Effects and config tables that make a scene a contact scene.
-CONTACT_EFFECTS = ("obstacle_contact", "friction", "self_collision")
-CONTACT_KEYS = ("obstacles", "self_collision", "contact")
+__all__ = ["compare", "contact_free", "load_scene", "trajectory_error"]
 
 
 def load_scene(name: str, res: int | None = None) -> dict:
-    """The shipped config ``configs/<name>.toml`` as a fresh dict; ``res`` sets a grid's
-    rows and columns (``res x res`` nodes)."""
-    cfg = tomllib.loads((CONFIG_DIR / f"{name}.toml").read_text())
-    if res is not None:
-        cfg["mesh"].update(rows=res, cols=res)
-    return cfg
-
-
-def contact_free(cfg: dict) -> dict:
-    """A copy of ``cfg`` without obstacles, friction and self-collision (the hat hanging from
-    its handles, the sock without the leg): isolates the core PD solver and its adjoint."""
-    cfg = copy.deepcopy(cfg)
-    cfg["effects"] = [e for e in cfg["effects"] if e not in CONTACT_EFFECTS]
-    for key in CONTACT_KEYS:
-        cfg.pop(key, None)
-    return cfg
+    """A shipped scene config as a fresh dict; ``res`` sets a grid's rows and columns."""
+    return _load_scene(name) if res is None else _load_scene(name, rows=res, cols=res)
 
 
 def trajectory_error(traj: np.ndarray, ref: np.ndarray) -> float:

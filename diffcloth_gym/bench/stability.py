@@ -997,7 +997,7 @@ def _load_scene(name: str) -> dict:
     """A shipped scene config as a dict (``configs/<name>.toml``)."""
     import tomllib
 
-    from diffcloth_gym.simulator import CONFIG_DIR
+    from diffcloth_gym.scenes import CONFIG_DIR
 
     return tomllib.loads((CONFIG_DIR / f"{name}.toml").read_text())
 
