@@ -1,18 +1,8 @@
-"""Helpers shared by the benchmarks: scene configs and error measures."""
+"""Error measures shared by the benchmarks: trajectory and gradient errors."""
 
 from __future__ import annotations
 
 import numpy as np
-
-from diffcloth_gym.scenes import contact_free
-from diffcloth_gym.scenes import load_scene as _load_scene
-
-__all__ = ["compare", "contact_free", "load_scene", "trajectory_error"]
-
-
-def load_scene(name: str, res: int | None = None) -> dict:
-    """A shipped scene config as a fresh dict; ``res`` sets a grid's rows and columns."""
-    return _load_scene(name) if res is None else _load_scene(name, rows=res, cols=res)
 
 
 def trajectory_error(traj: np.ndarray, ref: np.ndarray) -> float:
