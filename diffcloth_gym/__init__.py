@@ -4,7 +4,7 @@ The simulator is projective-dynamics cloth after DiffCloth (Li et al. 2022). Sta
 :class:`Simulator`::
 
     from diffcloth_gym import Simulator
-    sim = Simulator.from_config("wind")          # a name in configs/, a path, or a dict
+    sim = Simulator.from_config("wind")          # a shipped scene name, a TOML path, or a dict
     sim.step()                                   # one implicit-Euler step
     sim.positions                                # (n, 3) float64
 """
@@ -21,7 +21,8 @@ from diffcloth_gym.errors import (
     SolverError,
     UnsupportedError,
 )
-from diffcloth_gym.simulator import CONFIG_DIR, Simulator
+from diffcloth_gym.scenes import CONFIG_DIR, contact_free, load_scene, scene_names
+from diffcloth_gym.simulator import Simulator
 
 __all__ = [
     "CONFIG_DIR",
@@ -36,4 +37,7 @@ __all__ = [
     "Simulator",
     "SolverError",
     "UnsupportedError",
+    "contact_free",
+    "load_scene",
+    "scene_names",
 ]

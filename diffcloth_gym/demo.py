@@ -16,7 +16,7 @@ import numpy as np
 
 def main(argv: list[str] | None = None) -> Path:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--scene", default="sphere", help="scene name in configs/ or a TOML path")
+    parser.add_argument("--scene", default="sphere", help="shipped scene name (diffcloth_gym/configs/) or a TOML path")
     parser.add_argument("--steps", type=int, default=None, help="steps (default: the scene's)")
     parser.add_argument("--out", default="out/demo.png", help="picture to write")
     args = parser.parse_args(argv)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import warnings
-import tomllib
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -12,30 +11,7 @@ import numpy as np
 
 from diffcloth_gym import _core
 from diffcloth_gym.errors import ConfigError, ConvergenceWarning, InputError
-
-#: Folder of the scene configs shipped with the project.
-CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
-
-
-def load_config(config: str | Path | Mapping[str, Any]) -> tuple[dict, Path]:
-    """Returns ``(config dict, base folder for relative paths)``.
-
-    ``config`` is a scene name in ``configs/`` (``"wind"``), a path to a TOML file, or a dict
-    with the same structure as the TOML files.
-    """
-    if isinstance(config, Mapping):
-        return dict(config), Path.cwd()
-    path = Path(config)
-    if not path.suffix and not path.exists():
-        path = CONFIG_DIR / f"{config}.toml"
-    if not path.is_file():
-        known = sorted(p.stem for p in CONFIG_DIR.glob("*.toml"))
-        raise ConfigError(f"no scene config {str(config)!r} (not a file; shipped scenes: {known})")
-    try:
-        with open(path, "rb") as f:
-            return tomllib.load(f), path.resolve().parent
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: {e}") from None
+from diffcloth_gym.scenes import load_config
 
 
 def _nodes(name: str, value: Any, rows: int | None = None) -> np.ndarray:
@@ -69,7 +45,8 @@ class Simulator:
 
     @classmethod
     def from_config(cls, config: str | Path | Mapping[str, Any]) -> "Simulator":
-        """Builds a simulator from a scene name in ``configs/``, a TOML path, or a dict."""
+        """Builds a simulator from a shipped scene name (see
+        :func:`diffcloth_gym.scenes.scene_names`), a TOML path, or a dict."""
         cfg, base = load_config(config)
         try:
             text = json.dumps(cfg)

@@ -1,4 +1,4 @@
-"""The accuracy-vs-time study (diffcloth_gym.bench.accuracy) on Wind 12x12 with a few steps.
+"""The accuracy-vs-time study (benchmarks.accuracy) on Wind 12x12 with a few steps.
 
 Checks facts that must hold whatever the machine's speed (no wall-clock assertions): tighter
 forward tolerances give smaller trajectory errors, Anderson needs fewer iterations than plain
@@ -11,8 +11,8 @@ import json
 
 import pytest
 
-from diffcloth_gym.bench import accuracy, results
-from diffcloth_gym.bench.scene_utils import contact_free, load_scene
+from benchmarks import accuracy, results_io
+from diffcloth_gym.scenes import contact_free, load_scene
 
 
 @pytest.fixture(scope="module")
@@ -20,7 +20,7 @@ def rows():
     """All four parts on Wind 12x12, shortened (about 10 s in all)."""
     forward = accuracy.forward_scene(accuracy.grid_scene("wind", 12, 12), tolerances=(1e-3, 1e-6, 1e-10), caps=(10,))
     backward = accuracy.backward_scene(accuracy.grid_scene("wind", 12, 8, v_sigma=0.1), eps_list=(1e-2, 1e-4, 1e-6, 1e-8))
-    scene = accuracy.Scene("wind12x12", contact_free(load_scene("wind", 12)), 15)
+    scene = accuracy.Scene("wind12x12", contact_free(load_scene("wind", rows=12, cols=12)), 15)
     gradient = accuracy.gradient_scene(scene, full=False)
     timestep = accuracy.timestep_scene(accuracy.grid_scene("wind", 12, 0), hs=(1 / 25, 1 / 50, 1 / 100), h_ref=1 / 400,
                                        duration=0.2, tolerances=(1e-10,))
@@ -82,7 +82,7 @@ def test_report_has_every_part(rows, tmp_path):
     for part in accuracy.PARTS:
         {"forward": accuracy.plot_forward, "backward": accuracy.plot_backward, "gradient": accuracy.plot_gradient,
          "timestep": accuracy.plot_timestep}[part](rows[part], tmp_path)
-    json_path, md_path = accuracy.write_report(all_rows, results.meta({"command": "pytest"}), tmp_path)
+    json_path, md_path = accuracy.write_report(all_rows, results_io.meta({"command": "pytest"}), tmp_path)
     data = json.loads(json_path.read_text())
     assert {r["part"] for r in data["rows"]} == set(accuracy.PARTS)
     md = md_path.read_text()

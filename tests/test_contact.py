@@ -85,8 +85,8 @@ def test_contact_response_is_a_config_choice_with_the_same_physics():
     on the same state, the Delassus one reports its operator builds; anything else is refused."""
     import copy
 
-    from diffcloth_gym.simulator import load_config
-    base, _ = load_config("sphere")
+    from diffcloth_gym.scenes import load_scene
+    base = load_scene("sphere")
     states = {}
     for response in ("inertia", "delassus"):
         cfg = copy.deepcopy(base)

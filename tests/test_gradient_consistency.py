@@ -5,25 +5,15 @@ tolerance is 1e10 times off on the Hat (DESIGN.md section 3). Ours must be right
 clipping: recorded steps converge to solver.record_tolerance (default 1e-11).
 """
 
-import tomllib
 import warnings
 
 import numpy as np
 import pytest
 
 from diffcloth_gym import ConvergenceWarning, Simulator
-from diffcloth_gym.simulator import CONFIG_DIR
+from diffcloth_gym.scenes import contact_free, load_scene
 
 STEPS = 400
-
-
-def contact_free(name, **mesh):
-    cfg = tomllib.loads((CONFIG_DIR / f"{name}.toml").read_text())
-    cfg["effects"] = [e for e in cfg["effects"] if e not in ("obstacle_contact", "friction", "self_collision")]
-    for key in ("obstacles", "self_collision", "contact"):
-        cfg.pop(key, None)
-    cfg["mesh"].update(mesh)
-    return cfg
 
 
 def rollout_gradients(cfg, **solver):
@@ -52,7 +42,7 @@ def compare(a, b):
 
 @pytest.mark.parametrize("name, mesh", [("hat", {}), ("sock", {}), ("wind", {"rows": 24, "cols": 24})])
 def test_default_settings_give_the_converged_gradient(name, mesh):
-    cfg = contact_free(name, **mesh)
+    cfg = contact_free(load_scene(name, **mesh))
     default, default_targets = rollout_gradients(cfg)
     converged, converged_targets = rollout_gradients(cfg, tolerance=1e-12, record_tolerance=1e-12, max_iterations=5000)
     assert default["warnings"] == []
@@ -68,7 +58,7 @@ def test_full_scenes_with_contact_give_the_converged_gradient(name):
     step 70, where forward differences of 1e-7 grow 1e4-fold: recorded at 1e-10 its trajectory
     parted from the 1e-12 one (gradients 0.56 apart); at the default 1e-11 they agree to 3e-3.
     Its friction gradient is checked; self-contact never pushes on the Hat (mu_self is 0)."""
-    cfg = tomllib.loads((CONFIG_DIR / f"{name}.toml").read_text())
+    cfg = load_scene(name)
     with warnings.catch_warnings():
         # One Hat step stops at record_max_iterations at 4e-10 (under the trusted 1e-9).
         warnings.simplefilter("ignore", ConvergenceWarning)
@@ -88,6 +78,6 @@ def test_full_scenes_with_contact_give_the_converged_gradient(name):
 
 
 def test_loose_recording_is_reported_not_hidden():
-    cfg = contact_free("hat")
+    cfg = contact_free(load_scene("hat"))
     loose, _ = rollout_gradients(cfg, tolerance=1e-6, record_tolerance=1e-6, record_max_iterations=1)
     assert any("recorded steps stopped above" in w for w in loose["warnings"])

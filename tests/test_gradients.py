@@ -1,12 +1,11 @@
 """Gradients from Python: backward() against central finite differences, errors."""
 
-import tomllib
 
 import numpy as np
 import pytest
 
 from diffcloth_gym import InputError, Simulator
-from diffcloth_gym.simulator import CONFIG_DIR
+from diffcloth_gym.scenes import load_scene
 
 CFG = {
     "h": 0.01,
@@ -106,9 +105,7 @@ def test_backward_through_sliding_contact_gives_the_friction_gradient():
 @pytest.mark.parametrize("scene", ["wind", "slope"])
 def test_iterative_solvers_match_direct_at_1e_8(scene):
     """Paper Table 1 setting: iterative backward at eps 1e-8 agrees with the direct solve."""
-    cfg = tomllib.loads((CONFIG_DIR / f"{scene}.toml").read_text())
-    cfg["mesh"].update(rows=12, cols=12)
-    sim = Simulator.from_config(cfg)
+    sim = Simulator.from_config(load_scene(scene, rows=12, cols=12))
     sim.set_recording(True)
     steps = 30
     sim.step(steps=steps)

@@ -1,4 +1,4 @@
-"""The hard-case stability suite (``diffcloth_gym/bench/stability.py``) as tests.
+"""The hard-case stability suite (``benchmarks/stability/``) as tests.
 
 Every case runs once per session, at the CI size or, with ``pytest --full``, at the full size.
 ``test_case`` asserts all of a case's checks (finite states and gradients, no node inside an
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import pytest
 
-from diffcloth_gym.bench import stability as st
+from benchmarks import stability as st
 
 pytestmark = pytest.mark.stability
 

@@ -5,7 +5,7 @@ fn main() {
     diffcloth::init_linear_algebra();
     let scene = std::env::args().nth(1).unwrap_or_else(|| "hat".into());
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join(format!("../../configs/{scene}.toml"));
+        .join(format!("../../diffcloth_gym/configs/{scene}.toml"));
     let mut sim = Simulator::from_toml_file(&path).unwrap();
     let s = sim.solver().clone();
     sim.set_solver(SolverSettings {

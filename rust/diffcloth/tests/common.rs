@@ -2,7 +2,7 @@ use diffcloth::{Effect, SceneConfig, Simulator, Vec3};
 use std::path::PathBuf;
 
 pub fn configs_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../configs")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../diffcloth_gym/configs")
 }
 
 pub fn sim_from_toml(text: &str) -> Simulator {

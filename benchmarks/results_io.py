@@ -10,7 +10,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-RESULTS_DIR = Path(__file__).resolve().parents[2] / "benchmarks" / "results"
+#: Where the committed results live: ``benchmarks/results/`` beside this package.
+RESULTS_DIR = Path(__file__).resolve().parent / "results"
 
 
 def _cpu() -> str:

@@ -1,0 +1,34 @@
+"""``python -m benchmarks <study> [options]`` (from the repository root).
+
+Studies: ``accuracy`` (what each accuracy knob costs in time: forward Pareto fronts, the
+backward solver table, gradient error vs forward tolerance, time step), ``stability`` (the
+hard-case suite; ``--full`` for the full size), ``step_time`` (forward ms/step per solver
+setting, and the contact scenes) and ``backward_time`` (adjoint ms/step per solver). Each writes
+``benchmarks/results/<study>.{json,md}`` (accuracy: ``accuracy_time``); ``<study> --help`` lists
+its options.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+STUDIES = {
+    "accuracy": "benchmarks.accuracy",
+    "stability": "benchmarks.stability",
+    "step_time": "benchmarks.step_time",
+    "backward_time": "benchmarks.backward_time",
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] not in STUDIES:
+        print(__doc__.strip(), file=sys.stderr)
+        return 2
+    module = importlib.import_module(STUDIES[argv[0]])
+    return module.main(argv[1:]) or 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
