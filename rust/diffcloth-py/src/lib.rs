@@ -4,6 +4,9 @@
 //! - `simulator`: the `Simulator` class, one method per core call;
 //! - `conv`: numpy arrays and dicts to and from the core's types;
 //! - `errors`: core errors to Python exceptions, and the panic guard.
+//!
+//! The Python-side type stub is `diffcloth_gym/_core.pyi` (kept in sync by
+//! `tests/test_core_stub.py`).
 
 mod conv;
 mod errors;
