@@ -81,6 +81,67 @@ def test_bad_configs_raise_value_errors_naming_the_problem(mutate, needle):
     assert isinstance(err.value, diffcloth_gym.DiffClothError)
 
 
+def _with(mutate):
+    cfg = copy.deepcopy(SMALL_GRID)
+    mutate(cfg)
+    return lambda tmp_path: Simulator.from_config(cfg)
+
+
+def _obj_with_a_bad_face(tmp_path):
+    path = tmp_path / "bad.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n")
+    return Simulator.from_config({"h": 0.01, "effects": [], "material": {"density": 1.0},
+                                  "mesh": {"kind": "obj", "path": str(path)}})
+
+
+def _on_small(call):
+    return lambda tmp_path: call(Simulator.from_config(SMALL_GRID))
+
+
+@pytest.mark.parametrize(
+    "cause, error",
+    [
+        # Core errors, each mapped by the binding to its class.
+        (_with(lambda c: c.update(colour="red")), diffcloth_gym.ConfigError),
+        (_with(lambda c: c.update(mesh={"kind": "obj", "path": "/nonexistent.obj"})), diffcloth_gym.ConfigError),
+        (_with(lambda c: c["mesh"].update(rows=1)), diffcloth_gym.MeshError),
+        (_obj_with_a_bad_face, diffcloth_gym.MeshError),
+        (_on_small(lambda s: s._core.step(np.zeros((5, 3)), None, 1)), diffcloth_gym.InputError),
+        (_on_small(lambda s: s.set_params(k_stretch=-1.0)), diffcloth_gym.ParameterError),
+        (_on_small(lambda s: s.set_params(h=1e-200) or s.step()), diffcloth_gym.DivergedError),
+        # The binding's own checks.
+        (_on_small(lambda s: s._core.reset(np.zeros((3, 2)), None)), diffcloth_gym.InputError),
+        (_on_small(lambda s: s.obstacle_distance(0)), diffcloth_gym.InputError),
+        (_on_small(lambda s: s.set_params(stiffness=1.0)), diffcloth_gym.ParameterError),
+        (_on_small(lambda s: s.set_solver(acceleration="newton")), diffcloth_gym.ParameterError),
+        (_on_small(lambda s: s.set_recording(True, checkpoint_every=0)), diffcloth_gym.ParameterError),
+        # The Python wrapper's checks.
+        (_on_small(lambda s: s.step(attachment_targets=np.zeros((2, 2)))), diffcloth_gym.InputError),
+    ],
+    ids=["unknown config key", "missing mesh file", "grid below 2x2", "obj face out of range",
+         "targets row count", "negative stiffness", "diverging step", "reset shape", "no such obstacle",
+         "unknown parameter", "unknown acceleration", "checkpoint_every 0", "wrapper targets shape"],
+)
+def test_each_error_is_raised_with_its_class(tmp_path, cause, error):
+    with pytest.raises(error) as err:
+        cause(tmp_path)
+    assert type(err.value) is error
+    bad_input = issubclass(error, diffcloth_gym.errors.InvalidInputError)
+    assert isinstance(err.value, ValueError) == bad_input
+
+
+def test_a_diverged_step_is_rolled_back_and_the_simulator_stays_usable(small):
+    small.step()
+    before = small.positions
+    small.reset(x=before, v=np.full((small.num_nodes, 3), 1e200))
+    with pytest.raises(diffcloth_gym.DivergedError, match="diverged"):
+        small.step()
+    np.testing.assert_array_equal(small.positions, before)
+    small.reset()
+    small.step()
+    assert np.isfinite(small.positions).all()
+
+
 def test_unknown_scene_name_lists_the_shipped_ones():
     with pytest.raises(diffcloth_gym.ConfigError, match="wind"):
         Simulator.from_config("no_such_scene")

@@ -1,0 +1,378 @@
+//! `diffcloth_gym._core.Simulator`: one method per core call; each converts its arguments,
+//! runs the core through `guarded` (GIL released, panics caught) and converts the result.
+
+use crate::conv::{
+    contacts_dict, gradients_dict, nodes_to_py, pairs_to_py, profile_dict, read_nodes, read_steps,
+    stats_dict, triangles_to_py,
+};
+use crate::errors::{guarded, InputError, ParameterError};
+use diffcloth::{
+    AdjointSolver, BackwardOptions, Params, SceneConfig, Simulator, SolverSettings, StepInput,
+    StepStats, Vec3,
+};
+use numpy::{PyArray2, PyReadonlyArray2, PyReadonlyArray3};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::Path;
+
+#[pyclass(name = "Simulator", module = "diffcloth_gym._core")]
+pub(crate) struct PySimulator {
+    inner: Simulator,
+}
+
+#[pymethods]
+impl PySimulator {
+    /// Builds a simulator from a scene config in JSON; relative paths resolve against base_dir.
+    #[staticmethod]
+    fn from_json(py: Python<'_>, config_json: &str, base_dir: &str) -> PyResult<Self> {
+        let inner = guarded(py, || {
+            diffcloth::init_linear_algebra();
+            Simulator::new(&SceneConfig::from_json_str(
+                config_json,
+                Path::new(base_dir),
+            )?)
+        })?;
+        Ok(Self { inner })
+    }
+
+    #[pyo3(signature = (x=None, v=None))]
+    fn reset(
+        &mut self,
+        py: Python<'_>,
+        x: Option<PyReadonlyArray2<'_, f64>>,
+        v: Option<PyReadonlyArray2<'_, f64>>,
+    ) -> PyResult<()> {
+        let x = x.map(|a| read_nodes("x", &a)).transpose()?;
+        let v = v.map(|a| read_nodes("v", &a)).transpose()?;
+        let sim = &mut self.inner;
+        guarded(py, || sim.reset(x.as_deref(), v.as_deref()))
+    }
+
+    /// Advances `steps` steps with the same inputs; returns the last step's stats.
+    #[pyo3(signature = (attachment_targets=None, external_forces=None, steps=1))]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        attachment_targets: Option<PyReadonlyArray2<'_, f64>>,
+        external_forces: Option<PyReadonlyArray2<'_, f64>>,
+        steps: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let targets = attachment_targets
+            .map(|a| read_nodes("attachment_targets", &a))
+            .transpose()?;
+        let forces = external_forces
+            .map(|a| read_nodes("external_forces", &a))
+            .transpose()?;
+        let sim = &mut self.inner;
+        let stats = guarded(py, || {
+            let mut last = StepStats::default();
+            for _ in 0..steps {
+                last = sim.step(StepInput {
+                    attachment_targets: targets.as_deref(),
+                    external_forces: forces.as_deref(),
+                })?;
+            }
+            Ok(last)
+        })?;
+        stats_dict(py, stats)
+    }
+
+    #[getter]
+    fn positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        nodes_to_py(py, self.inner.positions())
+    }
+    #[getter]
+    fn velocities<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        nodes_to_py(py, self.inner.velocities())
+    }
+    #[getter]
+    fn rest_positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        nodes_to_py(py, &self.inner.mesh().positions)
+    }
+    #[getter]
+    fn triangles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> {
+        triangles_to_py(py, &self.inner.mesh().triangles)
+    }
+    #[getter]
+    fn masses(&self) -> Vec<f64> {
+        self.inner.masses().to_vec()
+    }
+    #[getter]
+    fn attachment_nodes(&self) -> Vec<usize> {
+        self.inner.attachment_nodes().to_vec()
+    }
+    #[getter]
+    fn attachment_targets<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        nodes_to_py(py, self.inner.attachment_targets())
+    }
+    #[getter]
+    fn handles(&self) -> Vec<usize> {
+        self.inner.handles().to_vec()
+    }
+    #[getter]
+    fn effects(&self) -> Vec<&'static str> {
+        self.inner.effects().names()
+    }
+    #[getter]
+    fn time(&self) -> f64 {
+        self.inner.time()
+    }
+    #[setter]
+    fn set_time(&mut self, py: Python<'_>, t: f64) -> PyResult<()> {
+        let sim = &mut self.inner;
+        guarded(py, || sim.set_time(t))
+    }
+    #[getter]
+    fn step_count(&self) -> u64 {
+        self.inner.step_count()
+    }
+    #[getter]
+    fn num_nodes(&self) -> usize {
+        self.inner.num_nodes()
+    }
+
+    fn params<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let p = self.inner.params();
+        let d = PyDict::new(py);
+        d.set_item("h", p.h)?;
+        d.set_item("density", p.density)?;
+        d.set_item("k_stretch", p.k_stretch)?;
+        d.set_item("k_bend", p.k_bend)?;
+        d.set_item("k_attach", p.k_attach)?;
+        d.set_item("gravity", p.gravity.as_slice().to_vec())?;
+        d.set_item("wind_direction", p.wind_direction.as_slice().to_vec())?;
+        d.set_item("wind_omega", p.wind_omega)?;
+        d.set_item("wind_phi", p.wind_phi)?;
+        Ok(d)
+    }
+
+    /// Updates physical parameters by name; unknown names and bad values raise.
+    #[pyo3(signature = (**kwargs))]
+    fn set_params(&mut self, py: Python<'_>, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<()> {
+        let mut p: Params = self.inner.params().clone();
+        if let Some(kwargs) = kwargs {
+            for (key, value) in kwargs.iter() {
+                let key: String = key.extract()?;
+                let vec3 = |v: &Bound<'_, PyAny>| -> PyResult<Vec3> {
+                    let a: [f64; 3] = v
+                        .extract()
+                        .map_err(|_| ParameterError::new_err(format!("{key} must be 3 numbers")))?;
+                    Ok(Vec3::from(a))
+                };
+                let scalar = |v: &Bound<'_, PyAny>| -> PyResult<f64> {
+                    v.extract()
+                        .map_err(|_| ParameterError::new_err(format!("{key} must be a number")))
+                };
+                match key.as_str() {
+                    "h" => p.h = scalar(&value)?,
+                    "density" => p.density = scalar(&value)?,
+                    "k_stretch" => p.k_stretch = scalar(&value)?,
+                    "k_bend" => p.k_bend = scalar(&value)?,
+                    "k_attach" => p.k_attach = scalar(&value)?,
+                    "gravity" => p.gravity = vec3(&value)?,
+                    "wind_direction" => p.wind_direction = vec3(&value)?,
+                    "wind_omega" => p.wind_omega = scalar(&value)?,
+                    "wind_phi" => p.wind_phi = scalar(&value)?,
+                    other => {
+                        return Err(ParameterError::new_err(format!(
+                            "unknown parameter {other:?}; known: h, density, k_stretch, k_bend, k_attach, \
+                             gravity, wind_direction, wind_omega, wind_phi"
+                        )))
+                    }
+                }
+            }
+        }
+        let sim = &mut self.inner;
+        guarded(py, || sim.set_params(p))
+    }
+
+    fn solver<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let s = self.inner.solver();
+        let d = PyDict::new(py);
+        d.set_item("max_iterations", s.max_iterations)?;
+        d.set_item("tolerance", s.tolerance)?;
+        d.set_item("acceleration", if s.anderson { "anderson" } else { "none" })?;
+        d.set_item("history", s.history)?;
+        d.set_item("parallel", s.parallel)?;
+        d.set_item("record_tolerance", s.record_tolerance)?;
+        d.set_item("record_max_iterations", s.record_max_iterations)?;
+        Ok(d)
+    }
+
+    /// Updates solver settings by name (max_iterations, tolerance, acceleration, history, parallel).
+    #[pyo3(signature = (**kwargs))]
+    fn set_solver(&mut self, py: Python<'_>, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<()> {
+        let mut s: SolverSettings = self.inner.solver().clone();
+        if let Some(kwargs) = kwargs {
+            for (key, value) in kwargs.iter() {
+                let key: String = key.extract()?;
+                let bad = |what: &str| ParameterError::new_err(format!("{key} must be {what}"));
+                match key.as_str() {
+                    "max_iterations" => s.max_iterations = value.extract().map_err(|_| bad("a positive integer"))?,
+                    "tolerance" => s.tolerance = value.extract().map_err(|_| bad("a number"))?,
+                    "record_tolerance" => s.record_tolerance = value.extract().map_err(|_| bad("a number"))?,
+                    "record_max_iterations" => s.record_max_iterations = value.extract().map_err(|_| bad("a positive integer"))?,
+                    "history" => s.history = value.extract().map_err(|_| bad("an integer"))?,
+                    "parallel" => s.parallel = value.extract().map_err(|_| bad("a bool"))?,
+                    "acceleration" => {
+                        let a: String = value.extract().map_err(|_| bad("\"anderson\" or \"none\""))?;
+                        s.anderson = match a.as_str() {
+                            "anderson" => true,
+                            "none" => false,
+                            _ => return Err(bad("\"anderson\" or \"none\"")),
+                        };
+                    }
+                    other => {
+                        return Err(ParameterError::new_err(format!(
+                            "unknown solver setting {other:?}; known: max_iterations, tolerance, record_tolerance, \
+                             record_max_iterations, acceleration, history, parallel"
+                        )))
+                    }
+                }
+            }
+        }
+        let sim = &mut self.inner;
+        guarded(py, || sim.set_solver(s))
+    }
+
+    /// Per-stage wall time (seconds) and counters accumulated since the last reset_profile().
+    fn profile<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        profile_dict(py, self.inner.profile())
+    }
+
+    fn reset_profile(&mut self) {
+        self.inner.reset_profile();
+    }
+
+    fn last_step<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        stats_dict(py, self.inner.last_step())
+    }
+
+    /// The last step's contacts as arrays: node_a, node_b (-1 for obstacle contacts),
+    /// obstacle (-1 for self-contacts), normal (k, 3), gap, mu, branch (0 take off, 1 stick,
+    /// 2 slip), impulse (k, 3) on node_a in N s.
+    fn contacts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        contacts_dict(py, self.inner.contacts())
+    }
+
+    /// Signed distance of every node to obstacle `index` at the current time, shape (n,).
+    fn obstacle_distance(&self, index: usize) -> PyResult<Vec<f64>> {
+        let obstacles = self.inner.obstacles();
+        let Some(o) = obstacles.get(index) else {
+            return Err(InputError::new_err(format!(
+                "obstacle {index} does not exist ({} obstacles)",
+                obstacles.len()
+            )));
+        };
+        Ok(self
+            .inner
+            .positions()
+            .iter()
+            .map(|p| o.query(p, self.inner.time()).0)
+            .collect())
+    }
+
+    /// Sets the friction coefficient of obstacle `index`.
+    fn set_obstacle_mu(&mut self, py: Python<'_>, index: usize, mu: f64) -> PyResult<()> {
+        let sim = &mut self.inner;
+        guarded(py, || sim.set_obstacle_mu(index, mu))
+    }
+
+    /// Sets the self-contact friction coefficient.
+    fn set_self_mu(&mut self, py: Python<'_>, mu: f64) -> PyResult<()> {
+        let sim = &mut self.inner;
+        guarded(py, || sim.set_self_mu(mu))
+    }
+
+    /// Starts (clearing the tape) or stops recording steps for backward(); with
+    /// checkpoint_every = K only every K-th state (plus each step's inputs) is kept and
+    /// backward re-simulates segments.
+    #[pyo3(signature = (on, checkpoint_every=None))]
+    fn set_recording(&mut self, on: bool, checkpoint_every: Option<usize>) -> PyResult<()> {
+        match (on, checkpoint_every) {
+            (true, Some(0)) => Err(ParameterError::new_err(
+                "checkpoint_every must be at least 1",
+            )),
+            (true, Some(k)) => {
+                self.inner.set_recording_checkpointed(k);
+                Ok(())
+            }
+            _ => {
+                self.inner.set_recording(on);
+                Ok(())
+            }
+        }
+    }
+
+    /// (recorded steps, bytes held by the tape).
+    fn tape_info(&self) -> (usize, usize) {
+        self.inner.tape().map_or((0, 0), |t| (t.len(), t.bytes()))
+    }
+
+    /// Backpropagates dL/dx and dL/dv of every recorded step's output (arrays (N, n, 3) or
+    /// None) and returns the gradients as a dict.
+    #[pyo3(signature = (dl_dx=None, dl_dv=None, solver="krylov", tolerance=1e-10, max_iterations=500))]
+    fn backward<'py>(
+        &mut self,
+        py: Python<'py>,
+        dl_dx: Option<PyReadonlyArray3<'_, f64>>,
+        dl_dv: Option<PyReadonlyArray3<'_, f64>>,
+        solver: &str,
+        tolerance: f64,
+        max_iterations: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let solver = match solver {
+            "direct" => AdjointSolver::Direct,
+            "krylov" => AdjointSolver::Krylov,
+            "fixed_point" => AdjointSolver::FixedPoint,
+            other => {
+                return Err(ParameterError::new_err(format!(
+                    "solver must be \"direct\", \"krylov\" or \"fixed_point\", got {other:?}"
+                )))
+            }
+        };
+        let (gx, gv) = (read_steps("dl_dx", dl_dx)?, read_steps("dl_dv", dl_dv)?);
+        let sim = &mut self.inner;
+        let options = BackwardOptions {
+            solver,
+            tolerance,
+            max_iterations,
+        };
+        let g = guarded(py, || sim.backward(&gx, &gv, &options))?;
+        gradients_dict(py, &g)
+    }
+
+    /// Records (on) or stops recording (off) the PD convergence trace of each step.
+    fn set_trace(&mut self, on: bool) {
+        self.inner.set_trace(on);
+    }
+
+    /// The last step's convergence trace, shape (iterations, 2): the step objective E and
+    /// the RMS PD update after each iteration (empty when tracing is off).
+    fn trace<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        pairs_to_py(py, self.inner.trace().unwrap_or_default())
+    }
+
+    /// Kinetic + gravitational + elastic energy of the current state.
+    fn mechanical_energy(&mut self) -> f64 {
+        self.inner.mechanical_energy()
+    }
+
+    /// Principal stretches (s1 >= s2) of every triangle at the current state, shape (t, 2).
+    fn principal_stretches<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let s = self
+            .inner
+            .stretch()
+            .map(|s| s.principal_stretches(self.inner.positions()))
+            .unwrap_or_default();
+        pairs_to_py(py, &s)
+    }
+
+    /// Writes the current state as an OBJ file.
+    fn write_obj(&self, py: Python<'_>, path: &str) -> PyResult<()> {
+        let sim = &self.inner;
+        guarded(py, || {
+            diffcloth::mesh::write_obj(Path::new(path), sim.mesh(), sim.positions())
+        })
+    }
+}
