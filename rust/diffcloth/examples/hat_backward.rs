@@ -12,7 +12,8 @@ fn main() {
             .map_or(default, |a| a.parse().unwrap())
     };
     let (steps, eps, repeats) = (arg(1, 50.0) as usize, arg(2, 1e-4), arg(3, 5.0) as usize);
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../diffcloth_gym/configs/hat.toml");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../diffcloth_gym/configs/hat.toml");
     let mut cfg = SceneConfig::from_toml_file(&path).unwrap();
     cfg.effects.retain(|e| {
         !matches!(

@@ -15,6 +15,7 @@ pub mod forces;
 pub mod forward;
 pub mod linalg;
 pub mod mesh;
+pub mod params;
 pub mod profile;
 pub mod scene;
 pub mod tape;
@@ -26,7 +27,8 @@ pub use backward::{AdjointSolver, BackwardOptions, Gradients};
 pub use config::{Effect, SceneConfig};
 pub use contact::{Branch, BranchCounts, Contact, ContactKind};
 pub use error::{Error, Result};
-pub use forward::{Params, Simulator, SolverSettings, StepInput, StepStats};
+pub use forward::{Simulator, StepInput, StepStats};
+pub use params::{Params, SolverSettings};
 pub use profile::Profile;
 
 /// Use one thread inside faer: its parallel sparse kernels are slower than sequential at cloth

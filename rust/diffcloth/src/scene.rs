@@ -1,9 +1,18 @@
-//! Builds the simulated objects a config describes: the mesh in its placement, node masses and
-//! the attached nodes. (The simulator then builds only the effects the scene declares.)
+//! Builds the simulated objects a config describes, validating as it goes: the mesh in its
+//! placement, the attached nodes, obstacles, self-collision, contact tolerances, and the
+//! initial parameters and solver settings. (The simulator builds only the effects the scene
+//! declares.)
 
-use crate::config::{AttachmentConfig, MeshConfig, SceneConfig};
+use crate::collision::{Motion, Obstacle, SelfCollision, Shape};
+use crate::config::{
+    AttachmentConfig, MaterialConfig, MeshConfig, ObstacleConfig, SceneConfig, SelfCollisionConfig,
+    ShapeConfig, SolverConfig,
+};
+use crate::contact::ContactSettings;
+use crate::effects::Effects;
 use crate::error::{Error, Result};
 use crate::mesh::{garment, grid, read_obj, TriMesh};
+use crate::params::{check_mu, validate_params, validate_solver, Params, SolverSettings};
 use crate::Vec3;
 use nalgebra::Rotation3;
 
@@ -107,4 +116,187 @@ fn top_corners(mesh: &TriMesh) -> Vec<usize> {
     let left = *on_top.iter().min_by(by_x).expect("mesh is not empty");
     let right = *on_top.iter().max_by(by_x).expect("mesh is not empty");
     vec![left, right]
+}
+
+fn build_shape(cfg: &ShapeConfig) -> Shape {
+    let v = Vec3::from;
+    match cfg {
+        ShapeConfig::Plane { point, normal } => {
+            let n = v(*normal);
+            Shape::Plane {
+                point: v(*point),
+                normal: if n.norm() > 0.0 { n.normalize() } else { n },
+            }
+        }
+        ShapeConfig::Sphere { center, radius } => Shape::Sphere {
+            center: v(*center),
+            radius: *radius,
+        },
+        ShapeConfig::Capsule { a, b, radius } => Shape::Capsule {
+            a: v(*a),
+            b: v(*b),
+            radius: *radius,
+        },
+        ShapeConfig::Box {
+            center,
+            half_extents,
+            rotate_deg,
+        } => {
+            let [rx, ry, rz] = rotate_deg.map(f64::to_radians);
+            Shape::Box {
+                center: v(*center),
+                half_extents: v(*half_extents),
+                rotation: nalgebra::Rotation3::from_euler_angles(rx, ry, rz),
+            }
+        }
+        ShapeConfig::Bowl {
+            center,
+            radius,
+            rim_height,
+        } => Shape::Bowl {
+            center: v(*center),
+            radius: *radius,
+            rim_height: *rim_height,
+        },
+        ShapeConfig::PyramidPit {
+            apex,
+            half_width,
+            height,
+        } => Shape::PyramidPit {
+            apex: v(*apex),
+            half_width: *half_width,
+            height: *height,
+        },
+        ShapeConfig::Union { parts } => Shape::Union(parts.iter().map(build_shape).collect()),
+    }
+}
+
+pub(crate) fn build_obstacle(index: usize, cfg: &ObstacleConfig) -> Result<Obstacle> {
+    let shape = build_shape(&cfg.shape);
+    shape
+        .validate()
+        .map_err(|e| Error::Config(format!("obstacles[{index}]: {e}")))?;
+    check_mu(&format!("obstacles[{index}].mu"), cfg.mu, Error::Config)?;
+    let motion = match (&cfg.velocity, &cfg.path) {
+        (Some(_), Some(_)) => {
+            return Err(Error::Config(format!(
+                "obstacles[{index}]: give `velocity` or `path`, not both"
+            )))
+        }
+        (Some(vel), None) => Motion::Linear {
+            velocity: Vec3::from(*vel),
+        },
+        (None, Some(rows)) => {
+            let ok = !rows.is_empty()
+                && rows.iter().all(|r| r.iter().all(|c| c.is_finite()))
+                && rows.windows(2).all(|w| w[1][0] > w[0][0]);
+            if !ok {
+                return Err(Error::Config(format!(
+                    "obstacles[{index}].path needs finite rows [t, dx, dy, dz] with increasing t"
+                )));
+            }
+            Motion::Path(
+                rows.iter()
+                    .map(|r| (r[0], Vec3::new(r[1], r[2], r[3])))
+                    .collect(),
+            )
+        }
+        (None, None) => Motion::Static,
+    };
+    Ok(Obstacle {
+        shape,
+        mu: cfg.mu,
+        motion,
+    })
+}
+
+/// Every obstacle of the scene, validated.
+pub(crate) fn build_obstacles(cfgs: &[ObstacleConfig]) -> Result<Vec<Obstacle>> {
+    cfgs.iter()
+        .enumerate()
+        .map(|(i, o)| build_obstacle(i, o))
+        .collect()
+}
+
+pub(crate) fn build_self_collision(
+    cfg: &SelfCollisionConfig,
+    mesh: &TriMesh,
+) -> Result<SelfCollision> {
+    if !(cfg.radius > 0.0 && cfg.radius.is_finite()) {
+        return Err(Error::Config(format!(
+            "self_collision.radius must be positive, got {}",
+            cfg.radius
+        )));
+    }
+    check_mu("self_collision.mu", cfg.mu, Error::Config)?;
+    Ok(SelfCollision::new(mesh, cfg.radius, cfg.mu))
+}
+
+/// The contact tolerances (defaults when the scene gives none).
+pub(crate) fn contact_settings(cfg: &SceneConfig, effects: &Effects) -> Result<ContactSettings> {
+    let c = cfg.contact.clone().unwrap_or_default();
+    if !(c.thickness >= 0.0 && c.margin >= 0.0 && c.thickness.is_finite() && c.margin.is_finite()) {
+        return Err(Error::Config(
+            "contact.thickness and contact.margin must be non-negative".into(),
+        ));
+    }
+    Ok(ContactSettings {
+        thickness: c.thickness,
+        margin: c.margin,
+        friction: effects.friction,
+        response: c.response,
+    })
+}
+
+/// The scene's initial physical parameters, validated.
+pub(crate) fn params_from_config(cfg: &SceneConfig) -> Result<Params> {
+    let m = &cfg.material;
+    let wind = cfg.wind.as_ref();
+    let params = Params {
+        h: cfg.h,
+        density: m.density,
+        k_stretch: m.k_stretch,
+        k_bend: m.k_bend,
+        k_attach: cfg.attachments.as_ref().map_or(0.0, |a| a.stiffness),
+        gravity: Vec3::from(cfg.gravity),
+        wind_direction: wind.map_or(Vec3::zeros(), |w| Vec3::from(w.direction)),
+        wind_omega: wind.map_or(0.0, |w| w.omega),
+        wind_phi: wind.map_or(0.0, |w| w.phi),
+    };
+    validate_params(&params)?;
+    Ok(params)
+}
+
+/// The principal-stretch limits `[min, max]`, validated.
+pub(crate) fn strain_limits(m: &MaterialConfig) -> Result<[f64; 2]> {
+    let [lo, hi] = m.strain_limits;
+    if !(lo > 0.0 && lo <= hi && hi.is_finite()) {
+        return Err(Error::Config(format!(
+            "material.strain_limits must satisfy 0 < min <= max, got [{lo}, {hi}]"
+        )));
+    }
+    Ok([lo, hi])
+}
+
+/// The scene's solver settings, validated.
+pub(crate) fn solver_from_config(s: &SolverConfig) -> Result<SolverSettings> {
+    let solver = SolverSettings {
+        max_iterations: s.max_iterations,
+        tolerance: s.tolerance,
+        record_tolerance: s.record_tolerance,
+        record_max_iterations: s.record_max_iterations,
+        anderson: match s.acceleration.as_str() {
+            "anderson" => true,
+            "none" => false,
+            other => {
+                return Err(Error::Config(format!(
+                    "solver.acceleration must be \"anderson\" or \"none\", got {other:?}"
+                )))
+            }
+        },
+        history: s.history,
+        parallel: s.parallel,
+    };
+    validate_solver(&solver)?;
+    Ok(solver)
 }

@@ -9,9 +9,9 @@
 //! Boundary vertices carry no constraint: their Laplacian is not a curvature.
 
 use super::{PdConstraints, Stiffness, PARALLEL_MIN_CONSTRAINTS};
-use nalgebra::Matrix3;
 use crate::mesh::TriMesh;
 use crate::Vec3;
+use nalgebra::Matrix3;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 

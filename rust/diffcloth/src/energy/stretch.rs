@@ -186,8 +186,7 @@ impl PdConstraints for Stretch {
             let f0 = va * b[0][0] + vb * b[1][0] + vc * b[2][0];
             let f1 = va * b[0][1] + vb * b[1][1] + vc * b[2][1];
             let df = [f0.x, f0.y, f0.z, f1.x, f1.y, f1.z];
-            let q: [f64; 6] =
-                std::array::from_fn(|r| (0..6).map(|k| j[6 * r + k] * df[k]).sum());
+            let q: [f64; 6] = std::array::from_fn(|r| (0..6).map(|k| j[6 * r + k] * df[k]).sum());
             let (q0, q1) = (Vec3::new(q[0], q[1], q[2]), Vec3::new(q[3], q[4], q[5]));
             for (l, &k) in tri.iter().enumerate() {
                 out[k] -= q0 * b[l][0] + q1 * b[l][1];

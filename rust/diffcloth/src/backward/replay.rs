@@ -1,0 +1,308 @@
+//! The backward driver: walks the tape from the last step to the first (re-simulating
+//! checkpointed segments), carrying dL/dx and dL/dv back through each step's adjoint solve.
+
+use super::contact::{linearize_contacts, ContactCoupling};
+use super::operator::{AdjointOperator, Linearization};
+use super::solvers::SolveWork;
+use super::{
+    AdjointSolver, AdjointStepStats, BackwardOptions, Gradients, TRUSTED_FORWARD_RESIDUAL,
+};
+use crate::error::{Error, Result};
+use crate::forward::Simulator;
+use crate::tape::{StepRecord, Tape};
+use crate::Vec3;
+use std::sync::Mutex;
+use std::time::Instant;
+
+/// Where a segment's backward pass continues from (checkpointed tapes).
+pub(super) struct Resume {
+    pub(super) grads: Gradients,
+    pub(super) carry_x: Vec<Vec3>,
+    pub(super) carry_v: Vec<Vec3>,
+    /// The last two adjoints, the warm start of the next solve.
+    pub(super) z: Vec<Vec3>,
+    pub(super) z_previous: Option<Vec<Vec3>>,
+}
+
+impl Simulator {
+    /// Backpropagates a loss through the recorded steps. `dl_dx[n]` and `dl_dv[n]` are the
+    /// loss gradients with respect to the positions and velocities after recorded step n
+    /// (empty slices mean zero). Requires a tape (`set_recording(true)` before the rollout).
+    pub fn backward(
+        &mut self,
+        dl_dx: &[Vec<Vec3>],
+        dl_dv: &[Vec<Vec3>],
+        options: &BackwardOptions,
+    ) -> Result<Gradients> {
+        let start = Instant::now();
+        let tape = self.take_tape().ok_or_else(|| {
+            Error::Input("no tape: call set_recording(true) before the rollout".into())
+        })?;
+        if let Err(e) = validate(tape.len(), self.num_nodes(), dl_dx, dl_dv, options) {
+            self.put_tape(Some(tape));
+            return Err(e);
+        }
+        let result = if let Tape::Checkpointed { .. } = tape {
+            self.backward_checkpointed(&tape, dl_dx, dl_dv, options)
+        } else {
+            self.backward_segments(
+                &tape,
+                &[(0, tape.records())],
+                dl_dx,
+                dl_dv,
+                options,
+                None,
+                &mut None,
+            )
+        };
+        self.put_tape(Some(tape));
+        result.map(|mut g| {
+            // "other" includes re-simulation of checkpointed segments.
+            let p = &mut g.profile;
+            p.other = start.elapsed().saturating_sub(p.dp + p.dr + p.solve);
+            g
+        })
+    }
+
+    /// Re-simulates each checkpointed segment (last first) and backpropagates through it;
+    /// the simulator's state is restored afterwards.
+    pub(super) fn backward_checkpointed(
+        &mut self,
+        tape: &Tape,
+        dl_dx: &[Vec<Vec3>],
+        dl_dv: &[Vec<Vec3>],
+        options: &BackwardOptions,
+    ) -> Result<Gradients> {
+        let saved = (
+            self.positions().to_vec(),
+            self.velocities().to_vec(),
+            self.time(),
+            self.attachment_targets().to_vec(),
+        );
+        let Tape::Checkpointed {
+            checkpoints,
+            inputs,
+            ..
+        } = tape
+        else {
+            unreachable!("called for checkpointed tapes only")
+        };
+        let steps = tape.len();
+        let mut state: Option<Resume> = None;
+        let mut outcome = Ok(());
+        for (s, cp) in checkpoints.iter().enumerate().rev() {
+            let end = checkpoints.get(s + 1).map_or(steps, |c| c.step);
+            let records = match self.resimulate(cp, &inputs[cp.step..end]) {
+                Ok(r) => r,
+                Err(e) => {
+                    outcome = Err(e);
+                    break;
+                }
+            };
+            let mut carry = None;
+            match self.backward_segments(
+                tape,
+                &[(cp.step, &records[..])],
+                dl_dx,
+                dl_dv,
+                options,
+                state.take(),
+                &mut carry,
+            ) {
+                Ok(g) => {
+                    let (carry_x, carry_v, z, z_previous) = carry.expect("set on success");
+                    state = Some(Resume {
+                        grads: g,
+                        carry_x,
+                        carry_v,
+                        z,
+                        z_previous,
+                    });
+                }
+                Err(e) => {
+                    outcome = Err(e);
+                    break;
+                }
+            }
+        }
+        // Back to the state before backward.
+        self.put_tape(None);
+        let restored = self
+            .reset(Some(&saved.0), Some(&saved.1))
+            .and_then(|_| self.set_time(saved.2));
+        if let Some(a) = self.attachments_mut() {
+            a.set_targets(&saved.3);
+        }
+        outcome?;
+        restored?;
+        Ok(state.map(|r| r.grads).unwrap_or_default())
+    }
+
+    pub(super) fn resimulate(
+        &mut self,
+        cp: &crate::tape::Checkpoint,
+        inputs: &[crate::tape::StepInputs],
+    ) -> Result<Vec<StepRecord>> {
+        self.set_recording(true);
+        self.reset(Some(&cp.x), Some(&cp.v))?;
+        self.set_time(cp.time)?;
+        for input in inputs {
+            self.step(crate::forward::StepInput {
+                attachment_targets: input.targets.as_deref(),
+                external_forces: input.forces.as_deref(),
+            })?;
+        }
+        Ok(match self.take_tape() {
+            Some(Tape::Full { records }) => records,
+            _ => Vec::new(),
+        })
+    }
+
+    /// Backpropagates through `segments` (each `(first step index, records)`, in increasing
+    /// order), continuing from `resume` (the gradients and carries of later segments).
+    pub(super) fn backward_segments(
+        &self,
+        tape: &Tape,
+        segments: &[(usize, &[StepRecord])],
+        dl_dx: &[Vec<Vec3>],
+        dl_dv: &[Vec<Vec3>],
+        options: &BackwardOptions,
+        resume: Option<Resume>,
+        carry_out: &mut Option<(Vec<Vec3>, Vec<Vec3>, Vec<Vec3>, Option<Vec<Vec3>>)>,
+    ) -> Result<Gradients> {
+        let steps = tape.len();
+        let n = self.num_nodes();
+        let h = self.params().h;
+        let mass = self.masses();
+        let Resume {
+            mut grads,
+            mut carry_x,
+            mut carry_v,
+            mut z,
+            z_previous,
+        } = resume.unwrap_or_else(|| Resume {
+            grads: Gradients {
+                mu_obstacles: vec![0.0; self.obstacles().len()],
+                attachment_targets: vec![Vec::new(); steps],
+                external_forces: vec![Vec::new(); steps],
+                steps: vec![AdjointStepStats::default(); steps],
+                ..Default::default()
+            },
+            carry_x: vec![Vec3::zeros(); n],
+            carry_v: vec![Vec3::zeros(); n],
+            z: vec![Vec3::zeros(); n],
+            z_previous: None,
+        });
+        let mut rhs = vec![Vec3::zeros(); n];
+        let mut have_previous = z_previous.is_some();
+        let mut z_previous = z_previous.unwrap_or_else(|| z.clone());
+        let mut op = AdjointOperator {
+            sim: self,
+            lin: Linearization::new(self),
+            contacts: Vec::new(),
+            coupling: ContactCoupling::default(),
+            contact_scratch: Mutex::default(),
+        };
+        let mut work = SolveWork::new(self.factor(), &op);
+        for &(first, records) in segments.iter().rev() {
+            for (offset, rec) in records.iter().enumerate().rev() {
+                let k = first + offset;
+                // The loss gradient on this step's output plus what later steps sent back.
+                let mut a_v = vec![Vec3::zeros(); n];
+                for i in 0..n {
+                    let ax = carry_x[i] + dl_dx.get(k).map_or(Vec3::zeros(), |g| g[i]);
+                    a_v[i] = carry_v[i] + dl_dv.get(k).map_or(Vec3::zeros(), |g| g[i]);
+                    rhs[i] = ax + a_v[i] / h;
+                }
+                let t_dp = Instant::now();
+                op.lin.update(self, &rec.x_next);
+                grads.profile.dp += t_dp.elapsed();
+                let t_dr = Instant::now();
+                op.contacts = linearize_contacts(self, rec).map_err(|e| match e {
+                    Error::Unsupported(m) => Error::Unsupported(format!("recorded step {k}: {m}")),
+                    other => other,
+                })?;
+                op.coupling = ContactCoupling::new(&op.contacts, n)?;
+                grads.profile.dr += t_dr.elapsed();
+                let t_solve = Instant::now();
+                // Warm start: extrapolate the last two adjoints (consecutive steps vary smoothly).
+                if have_previous {
+                    for i in 0..n {
+                        let zi = z[i];
+                        z[i] = 2.0 * zi - z_previous[i];
+                        z_previous[i] = zi;
+                    }
+                } else {
+                    z_previous.copy_from_slice(&z);
+                }
+                have_previous = true;
+                grads.steps[k] = self.solve_adjoint(&op, &rhs, &mut z, options, &mut work)?;
+                grads.profile.solve += t_solve.elapsed();
+                let (zeta, frame_x) =
+                    self.accumulate(rec, &op.contacts, &op.coupling, &z, &mut grads, k);
+                for i in 0..n {
+                    carry_x[i] = mass[i] / (h * h) * z[i] - a_v[i] / h + frame_x[i];
+                    carry_v[i] = mass[i] / h * z[i] + mass[i] * zeta[i];
+                }
+                if rec.residual > TRUSTED_FORWARD_RESIDUAL {
+                    grads.loose_steps.push((k, rec.residual));
+                }
+            }
+        }
+        grads.x0 = carry_x.clone();
+        grads.v0 = carry_v.clone();
+        *carry_out = Some((carry_x, carry_v, z, have_previous.then_some(z_previous)));
+        grads.warnings.clear();
+        if !grads.loose_steps.is_empty() {
+            let worst = grads
+                .loose_steps
+                .iter()
+                .map(|&(_, r)| r)
+                .fold(0.0, f64::max);
+            let first = grads.loose_steps.iter().map(|&(k, _)| k).min().unwrap_or(0);
+            grads.warnings.push(format!(
+                "{} of {steps} recorded steps stopped above the residual {TRUSTED_FORWARD_RESIDUAL:e} (worst {worst:.1e}, first at step {first}): \
+                 the adjoint linearizes unconverged steps and the gradient may be inaccurate; lower \
+                 solver.record_tolerance or raise record_max_iterations",
+                grads.loose_steps.len()
+            ));
+        }
+        let fell_back = grads.steps.iter().filter(|s| s.fell_back).count();
+        if fell_back > 0 && options.solver != AdjointSolver::Direct {
+            grads.warnings.push(format!(
+                "{fell_back} of {steps} adjoint solves fell back to the direct solver"
+            ));
+        }
+        Ok(grads)
+    }
+}
+
+/// Checks the loss gradients and options against the tape before any work is done (a
+/// checkpointed backward must not replay a segment for a call it then rejects).
+fn validate(
+    steps: usize,
+    n: usize,
+    dl_dx: &[Vec<Vec3>],
+    dl_dv: &[Vec<Vec3>],
+    options: &BackwardOptions,
+) -> Result<()> {
+    for (name, g) in [("dl_dx", dl_dx), ("dl_dv", dl_dv)] {
+        if !g.is_empty() && g.len() != steps {
+            return Err(Error::Input(format!(
+                "{name} must have one entry per recorded step ({steps}), got {}",
+                g.len()
+            )));
+        }
+        for (k, a) in g.iter().enumerate() {
+            if a.len() != n || !a.iter().all(|p| p.iter().all(|c| c.is_finite())) {
+                return Err(Error::Input(format!("{name}[{k}] must be {n} finite rows")));
+            }
+        }
+    }
+    if !(options.tolerance > 0.0 && options.tolerance.is_finite()) || options.max_iterations == 0 {
+        return Err(Error::Param(
+            "backward tolerance must be positive and max_iterations at least 1".into(),
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,275 @@
+//! The PD solve of one step (paper Sec. 3.1): local step (projections), global step (the
+//! prefactored solve), and the safeguarded accelerated iteration between them.
+
+use super::{Simulator, StepStats};
+use crate::profile::timed;
+use crate::Vec3;
+use std::time::Instant;
+
+impl Simulator {
+    /// Local step at `x`: projects every constraint, writes `M y / h^2 + sum_i w_i A_i^T p_i`
+    /// into `rhs` and returns the implicit-Euler objective
+    /// `E(x) = |x - y|_M^2 / (2 h^2) + sum_i w_i / 2 |A_i x - p_i|^2`.
+    pub(super) fn local_step(&mut self, which: Buffer) -> f64 {
+        let start = Instant::now();
+        let parallel = self.solver.parallel;
+        let x = std::mem::take(self.buffer(which));
+        let mut rhs = std::mem::take(&mut self.update);
+        rhs.copy_from_slice(&self.inertia_rhs);
+        let inv_2h2 = 0.5 / (self.params.h * self.params.h);
+        let mut energy: f64 = x
+            .iter()
+            .zip(&self.y)
+            .zip(&self.mass)
+            .map(|((xi, yi), m)| m * (xi - yi).norm_squared())
+            .sum::<f64>()
+            * inv_2h2;
+        for c in self.constraint_sets_mut() {
+            energy += c.project(&x, parallel);
+            c.add_rhs(&mut rhs);
+        }
+        *self.buffer(which) = x;
+        self.update = rhs;
+        self.profile.local += start.elapsed();
+        energy
+    }
+
+    pub(super) fn buffer(&mut self, which: Buffer) -> &mut Vec<Vec3> {
+        match which {
+            Buffer::Iterate => &mut self.iterate,
+            Buffer::Extrapolated => &mut self.extrapolated,
+        }
+    }
+
+    /// Global step: `mapped = P_s^{-1} rhs` (rhs in `update`), then `update = mapped - iterate`.
+    /// Returns the RMS of the update.
+    pub(super) fn global_step(&mut self) -> f64 {
+        let factor = &mut self.factor;
+        timed(&mut self.profile.global, || {
+            factor.solve_xyz(&mut self.update)
+        });
+        if self.delassus_response() {
+            let start = Instant::now();
+            self.delassus.respond(
+                &mut self.update,
+                &self.x,
+                self.params.h,
+                &mut self.contacts.contacts,
+            );
+            self.profile.contact_solve += start.elapsed();
+        }
+        let mut sum = 0.0;
+        for ((u, g), x) in self
+            .update
+            .iter_mut()
+            .zip(self.mapped.iter_mut())
+            .zip(&self.iterate)
+        {
+            *g = *u;
+            *u -= x;
+            sum += u.norm_squared();
+        }
+        (sum / (3 * self.iterate.len()) as f64).sqrt()
+    }
+
+    /// PD iterations from the initial guess `y`. Each iteration maps the iterate x to
+    /// `G(x) = P^{-1}(M y / h^2 + sum w A^T p(x) + r(x))` with contact forces `r`.
+    ///
+    /// Anderson acceleration is safeguarded two ways. Without contact, G never raises the
+    /// energy E, and an extrapolation is kept only if it lowers E below the last accepted
+    /// iterate's (Peng et al. 2018). Contact forces are not conservative, so with contacts an
+    /// extrapolation is kept only if its PD update `|G(x) - x|` is smaller than the last
+    /// iterate's; otherwise the plain step `G(x_k)` (already computed) is taken. Either way a
+    /// rejection restarts the history.
+    ///
+    /// Leaving a saddle. When the cloth buckles or snaps through, the iterates can first
+    /// approach a saddle of E; Anderson, a secant method for fixed points, is drawn to the
+    /// saddle (its extrapolations raise E and are rejected) and plain PD leaves it only at the
+    /// slow geometric rate of the unstable direction (Hat: hundreds of iterations with the
+    /// update growing about 3 % per iteration while E falls). Two plain updates in a row that
+    /// grow while E falls mark that regime; there the step `x + a (G(x) - x)` is tried with
+    /// `a` doubling up to [`ESCAPE_MAX_SCALE`] while E keeps falling. Every accepted point
+    /// still lowers E, so the safeguard is the same; the first shrinking update ends it. Contact
+    /// steps escape the same way (the Hat sliding off the head: 9 % -> 3 % of steps at the
+    /// iteration cap); there E leaves out the contact forces, which only the fixed point
+    /// must satisfy.
+    pub(super) fn solve_pd(&mut self) -> StepStats {
+        self.iterate.copy_from_slice(&self.y);
+        self.anderson.reset();
+        if let Some(t) = self.trace.as_mut() {
+            t.clear();
+        }
+        // Recorded steps converge further: the adjoint needs the converged solution.
+        let user_tol = self.solver.tolerance;
+        let tol = if self.tape.is_some() {
+            user_tol.min(self.solver.record_tolerance)
+        } else {
+            user_tol
+        };
+        let mut reached_user_tol: Option<usize> = None;
+        let max_it = if self.tape.is_some() {
+            self.solver
+                .max_iterations
+                .max(self.solver.record_max_iterations)
+        } else {
+            self.solver.max_iterations
+        };
+        let mut energy = self.local_step(Buffer::Iterate);
+        self.solve_contacts(Buffer::Iterate);
+        let mut residual = self.global_step();
+        let mut iterations = 1;
+        self.record(energy, residual);
+        // Saddle escape (see above): consecutive growing plain updates, and the step scale.
+        let mut growing = 0;
+        let mut escape_scale = 1.0;
+        // Residual guard (contact steps): the residual is not monotone under G, so accepted
+        // extrapolations and plain steps can cycle (measured on the Sock: a 14-iteration
+        // cycle, 3000 iterations without converging, where plain PD takes 101). Without a new
+        // lowest residual for `stall_window` iterations, the step finishes with plain PD.
+        let mut accelerate = self.solver.anderson;
+        let mut best_residual = residual;
+        let mut best_at = iterations;
+        let stall_window = 2 * self.anderson.history() + 4;
+        while residual > tol && iterations < max_it {
+            // While no contact pushes (all take off at the iterate), E is the exact objective
+            // and the energy guard applies; the residual guard only where contact forces act.
+            let energy_guard = self.contacts.all_take_off();
+            let mut accepted = false;
+            let mut extrapolated_by_anderson = false;
+            let (previous_residual, previous_energy) = (residual, energy);
+            if escape_scale > 1.0 {
+                for ((e, x), u) in self
+                    .extrapolated
+                    .iter_mut()
+                    .zip(&self.iterate)
+                    .zip(&self.update)
+                {
+                    *e = x + escape_scale * u;
+                }
+                let trial = self.local_step(Buffer::Extrapolated);
+                if trial < energy {
+                    std::mem::swap(&mut self.iterate, &mut self.extrapolated);
+                    energy = trial;
+                    accepted = true;
+                    escape_scale = (2.0 * escape_scale).min(ESCAPE_MAX_SCALE);
+                    self.profile.escape_steps += 1;
+                } else {
+                    escape_scale = 1.0;
+                }
+            } else if accelerate {
+                self.anderson.push(&self.update, &self.mapped);
+                if self
+                    .anderson
+                    .extrapolate(&self.update, &self.mapped, &mut self.extrapolated)
+                {
+                    let trial = self.local_step(Buffer::Extrapolated);
+                    if energy_guard {
+                        if trial < energy {
+                            std::mem::swap(&mut self.iterate, &mut self.extrapolated);
+                            energy = trial;
+                            accepted = true;
+                            extrapolated_by_anderson = true;
+                        }
+                    } else {
+                        // Residual guard: evaluate G at the extrapolation, keep it if better.
+                        self.solve_contacts(Buffer::Extrapolated);
+                        std::mem::swap(&mut self.iterate, &mut self.extrapolated);
+                        std::mem::swap(&mut self.mapped, &mut self.previous_mapped);
+                        let trial_residual = self.global_step();
+                        iterations += 1;
+                        if trial_residual < residual {
+                            energy = trial;
+                            residual = trial_residual;
+                            self.record(energy, residual);
+                            if residual < best_residual {
+                                (best_residual, best_at) = (residual, iterations);
+                            }
+                            if reached_user_tol.is_none() && residual <= user_tol {
+                                reached_user_tol = Some(iterations);
+                            }
+                            continue;
+                        }
+                        // Undo: back to x_k and G(x_k).
+                        std::mem::swap(&mut self.iterate, &mut self.extrapolated);
+                        std::mem::swap(&mut self.mapped, &mut self.previous_mapped);
+                    }
+                    if !accepted {
+                        self.profile.acceleration_rejections += 1;
+                        self.anderson.reset();
+                    }
+                }
+            }
+            if !accepted {
+                self.iterate.copy_from_slice(&self.mapped);
+                energy = self.local_step(Buffer::Iterate);
+            }
+            self.solve_contacts(Buffer::Iterate);
+            residual = self.global_step();
+            iterations += 1;
+            self.record(energy, residual);
+            if reached_user_tol.is_none() && residual <= user_tol {
+                reached_user_tol = Some(iterations);
+            }
+            if !energy_guard && accelerate && escape_scale == 1.0 {
+                if residual < best_residual {
+                    (best_residual, best_at) = (residual, iterations);
+                } else if iterations - best_at > stall_window {
+                    accelerate = false;
+                    self.profile.acceleration_stalls += 1;
+                }
+            }
+            let grew = !extrapolated_by_anderson
+                && residual > previous_residual
+                && energy < previous_energy;
+            growing = if grew { growing + 1 } else { 0 };
+            if growing == 0 {
+                if escape_scale > 1.0 {
+                    // Out of the saddle: the stall test starts afresh.
+                    (best_residual, best_at) = (residual, iterations);
+                }
+                escape_scale = 1.0;
+            } else if growing >= 2 && escape_scale == 1.0 {
+                escape_scale = 2.0;
+                self.anderson.reset();
+            }
+        }
+        if let Some(at) = reached_user_tol {
+            self.profile.polish_iterations += (iterations - at) as u64;
+        }
+        StepStats {
+            iterations,
+            residual,
+            converged: residual <= tol,
+            contacts: self.contacts.counts(),
+        }
+    }
+
+    /// Adds this iteration's contact forces at the iterate to the right-hand side in `update`.
+    pub(super) fn solve_contacts(&mut self, which: Buffer) {
+        // (The Delassus response acts after the global solve instead.)
+        if self.contacts.is_empty() || self.delassus_response() {
+            return;
+        }
+        let start = Instant::now();
+        let x = std::mem::take(self.buffer(which));
+        self.contacts.solve(
+            &x,
+            &self.x,
+            &self.mass,
+            self.params.h,
+            self.factor.matrix(),
+            &mut self.update,
+        );
+        *self.buffer(which) = x;
+        self.profile.contact_solve += start.elapsed();
+    }
+}
+
+#[derive(Clone, Copy)]
+pub(super) enum Buffer {
+    Iterate,
+    Extrapolated,
+}
+
+/// Largest step scale `a` of the saddle escape in [`Simulator::solve_pd`].
+const ESCAPE_MAX_SCALE: f64 = 64.0;
