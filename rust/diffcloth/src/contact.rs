@@ -7,7 +7,7 @@
 //! forces into the global solve. At a fixed point the prediction equals the solved velocity,
 //! so the contact law holds exactly.
 
-use crate::collision::{Obstacle, SelfCollision};
+use crate::collision::{HashScratch, Obstacle, SelfCollision};
 use crate::Vec3;
 use faer::sparse::SparseColMat;
 
@@ -107,6 +107,7 @@ const MAX_SWEEPS: usize = 50;
 pub struct ContactSet {
     pub contacts: Vec<Contact>,
     pairs: Vec<(usize, usize, f64)>,
+    hash: HashScratch,
     /// Nodes in at least one contact (each once) and whether any is in several.
     nodes: Vec<usize>,
     shared_nodes: bool,
@@ -150,7 +151,7 @@ impl ContactSet {
         t: f64,
         h: f64,
         obstacles: &[Obstacle],
-        self_collision: Option<&mut SelfCollision>,
+        self_collision: Option<&SelfCollision>,
         settings: &ContactSettings,
     ) {
         self.contacts.clear();
@@ -186,7 +187,7 @@ impl ContactSet {
             let v_max = v.iter().map(|vi| vi.norm()).fold(0.0, f64::max);
             let base = sc.radius + settings.margin;
             self.pairs.clear();
-            sc.find_pairs(x, base + 4.0 * h * v_max, &mut self.pairs);
+            sc.find_pairs(x, base + 4.0 * h * v_max, &mut self.hash, &mut self.pairs);
             for &(a, b, distance) in &self.pairs {
                 if distance >= base + 2.0 * h * (v[a].norm() + v[b].norm()) {
                     continue;

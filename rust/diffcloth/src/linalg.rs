@@ -12,20 +12,41 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::{SparseColMat, Triplet};
 use faer::{Par, Side};
+use std::sync::Arc;
 
 /// A symmetric positive-definite sparse matrix, kept factored as `L L^T`.
 ///
-/// All work buffers are allocated at construction so [`SpdFactor::solve_xyz`] does not allocate.
+/// Solves take the caller's work rows, so one factor serves many simulators (a shared model)
+/// and [`SpdFactor::solve_xyz`] allocates nothing.
 pub struct SpdFactor {
     n: usize,
-    symbolic: SymbolicCholesky<usize>,
+    /// Shared by copies (the pattern never changes with the values).
+    symbolic: Arc<SymbolicCholesky<usize>>,
     l_values: Vec<f64>,
     matrix: SparseColMat<usize, f64>,
     scratch: MemBuffer,
     /// The same factor laid out for node-major gather solves (rebuilt on every numeric
     /// factorization, which is rare: the PD matrix is constant between parameter changes).
     nodes: NodeSolve,
-    work: Vec<Vec3>,
+    /// Numeric factorizations done for this factor (and the one it was copied from).
+    factorizations: u64,
+}
+
+impl Clone for SpdFactor {
+    fn clone(&self) -> Self {
+        Self {
+            n: self.n,
+            symbolic: self.symbolic.clone(),
+            l_values: self.l_values.clone(),
+            matrix: self.matrix.clone(),
+            scratch: MemBuffer::new(
+                self.symbolic
+                    .factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
+            ),
+            nodes: self.nodes.clone(),
+            factorizations: self.factorizations,
+        }
+    }
 }
 
 /// `L` stored twice, strictly-lower rows (CSR, for `L y = b`) and strictly-lower columns (CSC,
@@ -35,7 +56,7 @@ pub struct SpdFactor {
 /// side (three stores per factor entry), which bounds it by the store port. Both gather forms
 /// here accumulate in registers, on `Vec3` rows, so the node-major PD state is solved without
 /// transposing it into columns.
-#[derive(Default)]
+#[derive(Clone, Default)]
 struct NodeSolve {
     perm: Vec<usize>,
     perm_inv: Vec<usize>,
@@ -169,11 +190,11 @@ impl SpdFactor {
         let mut factor = Self {
             n,
             l_values: vec![0.0; symbolic.len_val()],
-            symbolic,
+            symbolic: Arc::new(symbolic),
             matrix,
             scratch,
             nodes: NodeSolve::default(),
-            work: vec![Vec3::zeros(); n],
+            factorizations: 0,
         };
         factor.factor_numeric()?;
         Ok(factor)
@@ -207,6 +228,7 @@ impl SpdFactor {
             .map_err(|e| Error::Solver(format!("system matrix is not positive definite: {e:?}")))?;
         self.nodes = NodeSolve::new(&self.symbolic, &self.l_values)
             .ok_or_else(|| Error::Solver("expected a simplicial Cholesky factor".into()))?;
+        self.factorizations += 1;
         Ok(())
     }
 
@@ -216,6 +238,11 @@ impl SpdFactor {
             self.symbolic.len_val(),
             matches!(self.symbolic.raw(), SymbolicCholeskyRaw::Supernodal(_)),
         )
+    }
+
+    /// Numeric factorizations so far (copies count their original's).
+    pub fn factorizations(&self) -> u64 {
+        self.factorizations
     }
 
     pub fn dim(&self) -> usize {
@@ -228,11 +255,12 @@ impl SpdFactor {
     }
 
     /// Solves `P_s X = B` in place for the n x 3 right-hand side stored as one `Vec3` per node.
-    pub fn solve_xyz(&mut self, rhs: &mut [Vec3]) {
+    /// `work` holds n rows.
+    pub fn solve_xyz(&self, rhs: &mut [Vec3], work: &mut [Vec3]) {
         debug_assert_eq!(rhs.len(), self.n);
-        self.nodes.solve_permuted(rhs, &mut self.work);
+        self.nodes.solve_permuted(rhs, work);
         for (r, &p) in rhs.iter_mut().zip(&self.nodes.perm_inv) {
-            *r = self.work[p];
+            *r = work[p];
         }
     }
 
@@ -325,7 +353,7 @@ mod tests {
             .collect();
         let mut b = vec![Vec3::zeros(); n];
         f.mul_xyz(&x, &mut b);
-        f.solve_xyz(&mut b);
+        f.solve_xyz(&mut b, &mut vec![Vec3::zeros(); f.dim()]);
         for (a, e) in b.iter().zip(&x) {
             assert!((a - e).norm() < 1e-12);
         }

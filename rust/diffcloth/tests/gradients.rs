@@ -566,7 +566,7 @@ fn gradients_through_slipping_contact_on_a_sphere_match_finite_differences() {
 
 #[test]
 fn backward_without_a_tape_is_an_error() {
-    let mut sim = Simulator::from_toml_file(&configs_dir().join("slope.toml")).unwrap();
+    let sim = Simulator::from_toml_file(&configs_dir().join("slope.toml")).unwrap();
     assert!(sim
         .backward(&[], &[], &BackwardOptions::default())
         .unwrap_err()

@@ -4,5 +4,6 @@ mod contact;
 mod contact_response;
 mod forward_physics;
 mod gradients;
+mod model_sharing;
 mod pd_solver;
 mod scenes;

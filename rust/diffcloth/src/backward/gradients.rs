@@ -102,8 +102,6 @@ impl Simulator {
             match c.stiffness() {
                 Stiffness::Stretch => grads.k_stretch -= dot,
                 Stiffness::Bend => grads.k_bend -= dot,
-                // k_attach goes with the actions above, at the recorded targets.
-                Stiffness::Attach => {}
             }
         }
         let mass = self.masses();

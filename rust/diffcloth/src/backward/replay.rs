@@ -28,25 +28,35 @@ impl Simulator {
     /// Backpropagates a loss through the recorded steps. `dl_dx[n]` and `dl_dv[n]` are the
     /// loss gradients with respect to the positions and velocities after recorded step n
     /// (empty slices mean zero). Requires a tape (`set_recording(true)` before the rollout).
+    ///
+    /// The steps are linearized with the model they were recorded with, and checkpointed
+    /// segments are replayed on a simulator of their own: this simulator (state, step count,
+    /// profile, tape) is left exactly as it was.
     pub fn backward(
-        &mut self,
+        &self,
         dl_dx: &[Vec<Vec3>],
         dl_dv: &[Vec<Vec3>],
         options: &BackwardOptions,
     ) -> Result<Gradients> {
         let start = Instant::now();
-        let tape = self.take_tape().ok_or_else(|| {
+        let rec = self.recording().ok_or_else(|| {
             Error::Input("no tape: call set_recording(true) before the rollout".into())
         })?;
-        if let Err(e) = validate(tape.len(), self.num_nodes(), dl_dx, dl_dv, options) {
-            self.put_tape(Some(tape));
-            return Err(e);
+        let tape = &rec.tape;
+        validate(tape.len(), self.num_nodes(), dl_dx, dl_dv, options)?;
+        if let Some(k) = rec.changed_at {
+            return Err(Error::Input(format!(
+                "the parameters (or, for a checkpointed tape, the solver settings) changed at \
+                 recorded step {k}: the tape holds steps of two different models and has no \
+                 single linearization; call set_recording(true) again after changing them"
+            )));
         }
+        let mut replay = Simulator::from_model(rec.model.clone(), rec.solver.clone());
         let result = if let Tape::Checkpointed { .. } = tape {
-            self.backward_checkpointed(&tape, dl_dx, dl_dv, options)
+            replay.backward_checkpointed(tape, dl_dx, dl_dv, options)
         } else {
-            self.backward_segments(
-                &tape,
+            replay.backward_segments(
+                tape,
                 &[(0, tape.records())],
                 dl_dx,
                 dl_dv,
@@ -55,7 +65,6 @@ impl Simulator {
                 &mut None,
             )
         };
-        self.put_tape(Some(tape));
         result.map(|mut g| {
             // "other" includes re-simulation of checkpointed segments.
             let p = &mut g.profile;
@@ -64,8 +73,8 @@ impl Simulator {
         })
     }
 
-    /// Re-simulates each checkpointed segment (last first) and backpropagates through it;
-    /// the simulator's state is restored afterwards.
+    /// Re-simulates each checkpointed segment (last first) and backpropagates through it
+    /// (on a simulator of the backward's own).
     pub(super) fn backward_checkpointed(
         &mut self,
         tape: &Tape,
@@ -73,12 +82,6 @@ impl Simulator {
         dl_dv: &[Vec<Vec3>],
         options: &BackwardOptions,
     ) -> Result<Gradients> {
-        let saved = (
-            self.positions().to_vec(),
-            self.velocities().to_vec(),
-            self.time(),
-            self.attachment_targets().to_vec(),
-        );
         let Tape::Checkpointed {
             checkpoints,
             inputs,
@@ -89,18 +92,11 @@ impl Simulator {
         };
         let steps = tape.len();
         let mut state: Option<Resume> = None;
-        let mut outcome = Ok(());
         for (s, cp) in checkpoints.iter().enumerate().rev() {
             let end = checkpoints.get(s + 1).map_or(steps, |c| c.step);
-            let records = match self.resimulate(cp, &inputs[cp.step..end]) {
-                Ok(r) => r,
-                Err(e) => {
-                    outcome = Err(e);
-                    break;
-                }
-            };
+            let records = self.resimulate(cp, &inputs[cp.step..end])?;
             let mut carry = None;
-            match self.backward_segments(
+            let g = self.backward_segments(
                 tape,
                 &[(cp.step, &records[..])],
                 dl_dx,
@@ -108,33 +104,16 @@ impl Simulator {
                 options,
                 state.take(),
                 &mut carry,
-            ) {
-                Ok(g) => {
-                    let (carry_x, carry_v, z, z_previous) = carry.expect("set on success");
-                    state = Some(Resume {
-                        grads: g,
-                        carry_x,
-                        carry_v,
-                        z,
-                        z_previous,
-                    });
-                }
-                Err(e) => {
-                    outcome = Err(e);
-                    break;
-                }
-            }
+            )?;
+            let (carry_x, carry_v, z, z_previous) = carry.expect("set on success");
+            state = Some(Resume {
+                grads: g,
+                carry_x,
+                carry_v,
+                z,
+                z_previous,
+            });
         }
-        // Back to the state before backward.
-        self.put_tape(None);
-        let restored = self
-            .reset(Some(&saved.0), Some(&saved.1))
-            .and_then(|_| self.set_time(saved.2));
-        if let Some(a) = self.attachments_mut() {
-            a.set_targets(&saved.3);
-        }
-        outcome?;
-        restored?;
         Ok(state.map(|r| r.grads).unwrap_or_default())
     }
 

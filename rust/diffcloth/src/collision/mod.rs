@@ -6,5 +6,5 @@ mod self_collision;
 mod shape;
 
 pub use obstacle::{Motion, Obstacle};
-pub use self_collision::SelfCollision;
+pub use self_collision::{HashScratch, SelfCollision};
 pub use shape::Shape;

@@ -7,6 +7,7 @@
 use crate::mesh::TriMesh;
 use crate::Vec3;
 
+#[derive(Debug, Clone)]
 pub struct SelfCollision {
     /// Contact distance between two nodes (m).
     pub radius: f64,
@@ -15,6 +16,11 @@ pub struct SelfCollision {
     /// Per node, the sorted nodes it shares a triangle with (never a contact pair).
     excluded_offsets: Vec<usize>,
     excluded: Vec<usize>,
+}
+
+/// The spatial hash's buffers (per simulator: the collision settings above are shared).
+#[derive(Debug, Default)]
+pub struct HashScratch {
     sorted: Vec<(u64, usize)>,
     cells: Vec<[i64; 3]>,
 }
@@ -45,8 +51,6 @@ impl SelfCollision {
             mu,
             excluded_offsets,
             excluded,
-            sorted: Vec::with_capacity(n),
-            cells: vec![[0; 3]; n],
         }
     }
 
@@ -58,34 +62,41 @@ impl SelfCollision {
     }
 
     /// Appends every non-adjacent pair `(i, j, distance)`, `i < j`, closer than `reach`.
-    pub fn find_pairs(&mut self, x: &[Vec3], reach: f64, out: &mut Vec<(usize, usize, f64)>) {
+    pub fn find_pairs(
+        &self,
+        x: &[Vec3],
+        reach: f64,
+        hash: &mut HashScratch,
+        out: &mut Vec<(usize, usize, f64)>,
+    ) {
         let inv = 1.0 / reach;
-        self.sorted.clear();
+        hash.cells.resize(x.len(), [0; 3]);
+        hash.sorted.clear();
         for (i, p) in x.iter().enumerate() {
             let cell = [
                 (p.x * inv).floor() as i64,
                 (p.y * inv).floor() as i64,
                 (p.z * inv).floor() as i64,
             ];
-            self.cells[i] = cell;
-            self.sorted.push((cell_key(cell), i));
+            hash.cells[i] = cell;
+            hash.sorted.push((cell_key(cell), i));
         }
-        self.sorted.sort_unstable();
+        hash.sorted.sort_unstable();
         let reach2 = reach * reach;
         for i in 0..x.len() {
-            let c = self.cells[i];
+            let c = hash.cells[i];
             for dx in -1..=1 {
                 for dy in -1..=1 {
                     for dz in -1..=1 {
                         let cell = [c[0] + dx, c[1] + dy, c[2] + dz];
                         let key = cell_key(cell);
-                        let start = self.sorted.partition_point(|&(k, _)| k < key);
-                        for &(k, j) in &self.sorted[start..] {
+                        let start = hash.sorted.partition_point(|&(k, _)| k < key);
+                        for &(k, j) in &hash.sorted[start..] {
                             if k != key {
                                 break;
                             }
                             // A hash collision of two cells must not report a pair twice.
-                            if j <= i || self.cells[j] != cell {
+                            if j <= i || hash.cells[j] != cell {
                                 continue;
                             }
                             let d2 = (x[i] - x[j]).norm_squared();
@@ -125,9 +136,9 @@ mod tests {
                 }
             })
             .collect();
-        let mut sc = SelfCollision::new(&mesh, 0.05, 0.1);
+        let sc = SelfCollision::new(&mesh, 0.05, 0.1);
         let mut pairs = Vec::new();
-        sc.find_pairs(&x, 0.08, &mut pairs);
+        sc.find_pairs(&x, 0.08, &mut HashScratch::default(), &mut pairs);
         let mut brute = Vec::new();
         for i in 0..x.len() {
             for j in i + 1..x.len() {

@@ -8,13 +8,14 @@
 //! (Meyer et al. 2003), which makes `A_i x` the mean-curvature normal `2 H n` on any valence.
 //! Boundary vertices carry no constraint: their Laplacian is not a curvature.
 
-use super::{PdConstraints, Stiffness, PARALLEL_MIN_CONSTRAINTS};
+use super::{PdConstraints, Projections, Stiffness, PARALLEL_MIN_CONSTRAINTS};
 use crate::mesh::TriMesh;
 use crate::Vec3;
 use nalgebra::Matrix3;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 
+#[derive(Debug, Clone)]
 pub struct Bend {
     center: Vec<usize>,
     /// CSR over constraints: neighbours `j` and coefficients `c_ij`.
@@ -28,8 +29,6 @@ pub struct Bend {
     rest_length: Vec<f64>,
     /// Direction used only when the current curvature vector vanishes exactly.
     rest_vector: Vec<Vec3>,
-    projection: Vec<Vec3>,
-    energy: Vec<f64>,
 }
 
 impl Bend {
@@ -65,8 +64,6 @@ impl Bend {
             weight: Vec::new(),
             rest_length: Vec::new(),
             rest_vector: Vec::new(),
-            projection: Vec::new(),
-            energy: Vec::new(),
         };
         for i in (0..n).filter(|&i| !on_boundary[i] && !adjacency[i].is_empty()) {
             let area = vertex_area[i];
@@ -93,8 +90,6 @@ impl Bend {
                 .push(if length > 0.0 { lap } else { Vec3::zeros() });
         }
         b.weight = vec![0.0; b.center.len()];
-        b.projection = vec![Vec3::zeros(); b.center.len()];
-        b.energy = vec![0.0; b.center.len()];
         b.set_stiffness(k_bend);
         b
     }
@@ -187,36 +182,36 @@ impl PdConstraints for Bend {
         }
     }
 
-    fn project(&mut self, x: &[Vec3], parallel: bool) -> f64 {
-        // Move the output buffers out so `work` can borrow the geometry (no allocation).
-        let (mut projection, mut energy) = (
-            std::mem::take(&mut self.projection),
-            std::mem::take(&mut self.energy),
-        );
-        let this = &*self;
-        let work = |(i, (p, e)): (usize, (&mut Vec3, &mut f64))| {
-            (*p, *e) = this.project_one(i, x);
+    fn new_projections(&self) -> Projections {
+        Projections::new(self.len(), 3)
+    }
+
+    fn project(&self, x: &[Vec3], parallel: bool, out: &mut Projections) -> f64 {
+        let work = |(i, (p, e)): (usize, (&mut [f64], &mut f64))| {
+            let (projection, energy) = self.project_one(i, x);
+            p.copy_from_slice(projection.as_slice());
+            *e = energy;
         };
-        if parallel && projection.len() >= PARALLEL_MIN_CONSTRAINTS {
-            projection
-                .par_iter_mut()
+        let Projections { values, energy } = out;
+        if parallel && energy.len() >= PARALLEL_MIN_CONSTRAINTS {
+            values
+                .par_chunks_mut(3)
                 .zip(energy.par_iter_mut())
                 .enumerate()
                 .for_each(work);
         } else {
-            projection
-                .iter_mut()
+            values
+                .chunks_mut(3)
                 .zip(energy.iter_mut())
                 .enumerate()
                 .for_each(work);
         }
-        (self.projection, self.energy) = (projection, energy);
-        self.energy.iter().sum()
+        energy.iter().sum()
     }
 
-    fn add_rhs(&self, rhs: &mut [Vec3]) {
-        for i in 0..self.len() {
-            let wp = self.weight[i] * self.projection[i];
+    fn add_rhs(&self, projections: &Projections, rhs: &mut [Vec3]) {
+        for (i, p) in projections.values.chunks_exact(3).enumerate() {
+            let wp = self.weight[i] * Vec3::from_column_slice(p);
             let range = self.offsets[i]..self.offsets[i + 1];
             let mut center = Vec3::zeros();
             for (&j, &c) in self.neighbor[range.clone()].iter().zip(&self.coef[range]) {
@@ -225,6 +220,10 @@ impl PdConstraints for Bend {
             }
             rhs[self.center[i]] += center;
         }
+    }
+
+    fn boxed_clone(&self) -> Box<dyn PdConstraints> {
+        Box::new(self.clone())
     }
 
     fn stiffness(&self) -> Stiffness {

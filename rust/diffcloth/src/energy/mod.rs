@@ -33,12 +33,18 @@ pub(crate) const PARALLEL_MIN_CONSTRAINTS: usize = 2048;
 pub trait PdConstraints: Send + Sync {
     /// Appends `w_i A_i^T A_i` as scalar (node, node, value) triplets.
     fn add_system_triplets(&self, out: &mut Vec<(usize, usize, f64)>);
-    /// Local step: projects every constraint at `x`, keeping the projections for
-    /// [`PdConstraints::add_rhs`] (and later for the backward pass). Returns the constraint
-    /// energy `sum_i w_i / 2 |A_i x - p_i|^2` at `x`.
-    fn project(&mut self, x: &[Vec3], parallel: bool) -> f64;
-    /// Adds `sum_i w_i A_i^T p_i` of the stored projections to `rhs`.
-    fn add_rhs(&self, rhs: &mut [Vec3]);
+    /// Buffers for [`PdConstraints::project`], sized for this set. They live in each
+    /// simulator's workspace: the set itself is read-only and shared by every simulator of a
+    /// model.
+    fn new_projections(&self) -> Projections;
+    /// Local step: projects every constraint at `x` into `out`, for
+    /// [`PdConstraints::add_rhs`]. Returns the constraint energy
+    /// `sum_i w_i / 2 |A_i x - p_i(A_i x)|^2` at `x`.
+    fn project(&self, x: &[Vec3], parallel: bool, out: &mut Projections) -> f64;
+    /// Adds `sum_i w_i A_i^T p_i` of the projections to `rhs`.
+    fn add_rhs(&self, projections: &Projections, rhs: &mut [Vec3]);
+    /// A copy behind a new box (a model is copied on write when a parameter changes).
+    fn boxed_clone(&self) -> Box<dyn PdConstraints>;
 
     /// The stiffness parameter the weights are proportional to.
     fn stiffness(&self) -> Stiffness;
@@ -61,12 +67,29 @@ pub trait PdConstraints: Send + Sync {
     fn stiffness_dot(&self, x: &[Vec3], z: &[Vec3]) -> f64;
 }
 
+/// One local step's output: each constraint's projection (in the set's own layout) and its
+/// energy (summed serially afterwards, so the total is bitwise the same on any thread count).
+#[derive(Debug, Clone, Default)]
+pub struct Projections {
+    pub values: Vec<f64>,
+    pub energy: Vec<f64>,
+}
+
+impl Projections {
+    /// `constraints` projections of `width` floats each.
+    pub fn new(constraints: usize, width: usize) -> Self {
+        Self {
+            values: vec![0.0; constraints * width],
+            energy: vec![0.0; constraints],
+        }
+    }
+}
+
 /// Which physical parameter scales a constraint set's weights.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Stiffness {
     Stretch,
     Bend,
-    Attach,
 }
 
 #[cfg(test)]
@@ -86,12 +109,18 @@ pub(crate) mod testing {
         out
     }
 
+    /// The constraint energy at `x`.
+    pub fn energy(c: &dyn PdConstraints, x: &[Vec3]) -> f64 {
+        c.project(x, false, &mut c.new_projections())
+    }
+
     /// Gradient of the constraint energy at `x`: `K x - sum_i w_i A_i^T p_i(x)`.
     pub fn gradient(c: &mut dyn PdConstraints, x: &[Vec3]) -> (f64, Vec<Vec3>) {
-        let e = c.project(x, false);
+        let mut proj = c.new_projections();
+        let e = c.project(x, false, &mut proj);
         let mut g = apply_system(c, x);
         let mut rhs = vec![Vec3::zeros(); x.len()];
-        c.add_rhs(&mut rhs);
+        c.add_rhs(&proj, &mut rhs);
         for (gi, ri) in g.iter_mut().zip(&rhs) {
             *gi -= ri;
         }
@@ -107,9 +136,9 @@ pub(crate) mod testing {
         for i in 0..x.len() {
             for d in 0..3 {
                 xp[i][d] = x[i][d] + eps;
-                let ep = c.project(&xp, false);
+                let ep = energy(c, &xp);
                 xp[i][d] = x[i][d] - eps;
-                let em = c.project(&xp, false);
+                let em = energy(c, &xp);
                 xp[i][d] = x[i][d];
                 let fd = (ep - em) / (2.0 * eps);
                 assert!(

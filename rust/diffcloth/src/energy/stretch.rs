@@ -4,7 +4,7 @@
 //! triangle's own 2D frame. The projection is `U clamp(Sigma, s_min, s_max) V^T`
 //! (as-rigid-as-possible for `s_min = s_max = 1`), and `w_i = k_stretch * rest area`.
 
-use super::{PdConstraints, Stiffness, PARALLEL_MIN_CONSTRAINTS};
+use super::{PdConstraints, Projections, Stiffness, PARALLEL_MIN_CONSTRAINTS};
 use crate::mesh::TriMesh;
 use crate::Vec3;
 use nalgebra::{Matrix2, Matrix3x2, Vector2};
@@ -12,6 +12,7 @@ use rayon::prelude::*;
 
 pub type Mat32 = Matrix3x2<f64>;
 
+#[derive(Debug, Clone)]
 pub struct Stretch {
     triangles: Vec<[usize; 3]>,
     /// `F = sum_l x_l b_l^T`: row `l` of `[[-1,-1],[1,0],[0,1]] D_m^{-1}`.
@@ -20,8 +21,6 @@ pub struct Stretch {
     weight: Vec<f64>,
     strain_min: f64,
     strain_max: f64,
-    projection: Vec<Mat32>,
-    energy: Vec<f64>,
 }
 
 impl Stretch {
@@ -55,8 +54,6 @@ impl Stretch {
             rest_area,
             strain_min,
             strain_max,
-            projection: vec![Mat32::zeros(); n],
-            energy: vec![0.0; n],
         };
         s.set_stiffness(k_stretch);
         s
@@ -103,53 +100,56 @@ impl PdConstraints for Stretch {
         }
     }
 
-    fn project(&mut self, x: &[Vec3], parallel: bool) -> f64 {
+    fn new_projections(&self) -> Projections {
+        Projections::new(self.len(), 6)
+    }
+
+    fn project(&self, x: &[Vec3], parallel: bool, out: &mut Projections) -> f64 {
         let (lo, hi) = (self.strain_min, self.strain_max);
-        // Move the output buffers out so `work` can borrow the geometry (no allocation).
-        let (mut projection, mut energy) = (
-            std::mem::take(&mut self.projection),
-            std::mem::take(&mut self.energy),
-        );
-        let this = &*self;
         // Triangles go in groups of LANES: their independent sqrt/div chains overlap and
         // vectorize, instead of one latency-bound chain after another.
-        let work = |(group, (p, e)): (usize, (&mut [Mat32], &mut [f64]))| {
+        let work = |(group, (p, e)): (usize, (&mut [f64], &mut [f64]))| {
             let base = group * LANES;
             let mut f = [Mat32::zeros(); LANES];
-            for (l, fl) in f.iter_mut().enumerate().take(p.len()) {
-                *fl = this.deformation_gradient(base + l, x);
+            for (l, fl) in f.iter_mut().enumerate().take(e.len()) {
+                *fl = self.deformation_gradient(base + l, x);
             }
             let projected = project_singular_values_lanes(&f, lo, hi);
-            for l in 0..p.len() {
-                p[l] = projected[l];
-                e[l] = 0.5 * this.weight[base + l] * (f[l] - projected[l]).norm_squared();
+            for l in 0..e.len() {
+                p[6 * l..6 * l + 6].copy_from_slice(projected[l].as_slice());
+                e[l] = 0.5 * self.weight[base + l] * (f[l] - projected[l]).norm_squared();
             }
         };
-        if parallel && projection.len() >= PARALLEL_MIN_CONSTRAINTS {
-            projection
-                .par_chunks_mut(LANES)
+        let Projections { values, energy } = out;
+        if parallel && energy.len() >= PARALLEL_MIN_CONSTRAINTS {
+            values
+                .par_chunks_mut(6 * LANES)
                 .zip(energy.par_chunks_mut(LANES))
                 .enumerate()
                 .for_each(work);
         } else {
-            projection
-                .chunks_mut(LANES)
+            values
+                .chunks_mut(6 * LANES)
                 .zip(energy.chunks_mut(LANES))
                 .enumerate()
                 .for_each(work);
         }
-        (self.projection, self.energy) = (projection, energy);
         // Serial sum: bitwise identical whatever the thread count.
-        self.energy.iter().sum()
+        energy.iter().sum()
     }
 
-    fn add_rhs(&self, rhs: &mut [Vec3]) {
-        for (t, tri) in self.triangles.iter().enumerate() {
-            let wp = self.weight[t] * self.projection[t];
+    fn add_rhs(&self, projections: &Projections, rhs: &mut [Vec3]) {
+        let p = projections.values.chunks_exact(6);
+        for ((t, tri), p) in self.triangles.iter().enumerate().zip(p) {
+            let wp = self.weight[t] * Mat32::from_column_slice(p);
             for l in 0..3 {
                 rhs[tri[l]] += wp * self.shape[t][l];
             }
         }
+    }
+
+    fn boxed_clone(&self) -> Box<dyn PdConstraints> {
+        Box::new(self.clone())
     }
 
     fn stiffness(&self) -> Stiffness {
@@ -512,8 +512,8 @@ mod tests {
     #[test]
     fn rest_shape_has_identity_stretch_and_zero_energy() {
         let mesh = grid(4, 5, 2.0, 1.0, GridPlane::Xy).unwrap();
-        let mut s = Stretch::new(&mesh, 100.0, 1.0, 1.0);
-        assert!(s.project(&mesh.positions, false) < 1e-20);
+        let s = Stretch::new(&mesh, 100.0, 1.0, 1.0);
+        assert!(energy(&s, &mesh.positions) < 1e-20);
         for (s1, s2) in s.principal_stretches(&mesh.positions) {
             assert!((s1 - 1.0).abs() < 1e-12 && (s2 - 1.0).abs() < 1e-12);
         }

@@ -11,14 +11,14 @@ impl Simulator {
     /// node's reach also covers the motion of the step just solved (in `mapped`).
     pub(super) fn detect_contacts(&mut self, with_motion: bool) {
         let detect_start = Instant::now();
-        let h = self.params.h;
-        let mut velocity = std::mem::take(&mut self.detect_velocity);
+        let h = self.model.params.h;
+        let mut velocity = std::mem::take(&mut self.work.detect_velocity);
         velocity.clear();
         velocity.extend(
-            self.v
+            self.state.v
                 .iter()
-                .zip(&self.x)
-                .zip(&self.mapped)
+                .zip(&self.state.x)
+                .zip(&self.work.mapped)
                 .map(|((v, x), xn)| {
                     let moved = (xn - x) / h;
                     if with_motion && moved.norm() > v.norm() {
@@ -28,21 +28,21 @@ impl Simulator {
                     }
                 }),
         );
-        self.contacts.detect(
-            &self.x,
+        self.work.contacts.detect(
+            &self.state.x,
             &velocity,
-            &self.mass,
-            self.time,
+            &self.model.mass,
+            self.state.time,
             h,
-            &self.obstacles,
-            self.self_collision.as_mut(),
-            &self.contact_settings,
+            &self.model.obstacles,
+            self.model.self_collision.as_ref(),
+            &self.model.contact_settings,
         );
-        self.detect_velocity = velocity;
+        self.work.detect_velocity = velocity;
         self.profile.detection += detect_start.elapsed();
         if self.delassus_response() {
             let start = Instant::now();
-            self.delassus.build(&self.factor, &self.contacts.contacts);
+            self.work.delassus.build(&self.model.factor, &self.work.contacts.contacts);
             self.profile.contact_solve += start.elapsed();
             self.profile.delassus_builds += 1;
         }
@@ -50,28 +50,29 @@ impl Simulator {
 
     /// Whether this step's contacts respond through the Delassus operator.
     pub(super) fn delassus_response(&self) -> bool {
-        !self.contacts.is_empty() && self.contact_settings.response == ContactResponse::Delassus
+        !self.work.contacts.is_empty() && self.model.contact_settings.response == ContactResponse::Delassus
     }
 
     /// Whether the solved step (`mapped`) put a node that has no contact with an obstacle
     /// inside that obstacle's contact layer.
     pub(super) fn missed_obstacle_contact(&mut self) -> bool {
         let detect_start = Instant::now();
-        let mut covered = std::mem::take(&mut self.covered);
+        let mut covered = std::mem::take(&mut self.work.covered);
         let mut missed = false;
-        for (o, obstacle) in self.obstacles.iter().enumerate() {
+        for (o, obstacle) in self.model.obstacles.iter().enumerate() {
             covered.clear();
-            covered.resize(self.x.len(), false);
-            for c in &self.contacts.contacts {
+            covered.resize(self.state.x.len(), false);
+            for c in &self.work.contacts.contacts {
                 if let crate::contact::ContactKind::Obstacle { node, obstacle } = c.kind {
                     if obstacle == o {
                         covered[node] = true;
                     }
                 }
             }
-            let (offset, _) = obstacle.motion.at(self.time + self.params.h);
-            let layer = self.contact_settings.thickness;
+            let (offset, _) = obstacle.motion.at(self.state.time + self.model.params.h);
+            let layer = self.model.contact_settings.thickness;
             missed |= self
+                .work
                 .mapped
                 .iter()
                 .zip(&covered)
@@ -80,7 +81,7 @@ impl Simulator {
                 break;
             }
         }
-        self.covered = covered;
+        self.work.covered = covered;
         self.profile.detection += detect_start.elapsed();
         missed
     }

@@ -17,11 +17,11 @@ impl Simulator {
     /// Objective `E(x)` of the implicit step prepared by [`Simulator::prepare`] and its exact
     /// gradient `P x - rhs(x)` (what PD minimizes; used by tests and studies).
     pub fn step_objective(&mut self, x: &[Vec3]) -> (f64, Vec<Vec3>) {
-        self.iterate.copy_from_slice(x);
+        self.work.iterate.copy_from_slice(x);
         let e = self.local_step(Buffer::Iterate);
         let mut grad = vec![Vec3::zeros(); x.len()];
-        self.factor.mul_xyz(x, &mut grad);
-        for (g, r) in grad.iter_mut().zip(&self.update) {
+        self.model.factor.mul_xyz(x, &mut grad);
+        for (g, r) in grad.iter_mut().zip(&self.work.update) {
             *g -= r;
         }
         (e, grad)
@@ -30,32 +30,36 @@ impl Simulator {
     /// Solves the prepared step and returns its positions without advancing the state.
     pub fn solve_prepared(&mut self) -> (Vec<Vec3>, StepStats) {
         let stats = self.solve_pd();
-        (self.mapped.clone(), stats)
+        (self.work.mapped.clone(), stats)
     }
 
     /// Total mechanical energy: kinetic + gravitational + elastic at the current state.
     pub fn mechanical_energy(&mut self) -> f64 {
         let kinetic: f64 = self
+            .state
             .v
             .iter()
-            .zip(&self.mass)
+            .zip(&self.model.mass)
             .map(|(v, m)| 0.5 * m * v.norm_squared())
             .sum();
-        let potential: f64 = if self.effects.gravity {
+        let potential: f64 = if self.model.effects.gravity {
             -self
+                .state
                 .x
                 .iter()
-                .zip(&self.mass)
-                .map(|(x, m)| m * self.params.gravity.dot(x))
+                .zip(&self.model.mass)
+                .map(|(x, m)| m * self.model.params.gravity.dot(x))
                 .sum::<f64>()
         } else {
             0.0
         };
-        let x = self.x.clone();
-        let elastic: f64 = self
-            .constraint_sets_mut()
-            .map(|c| c.project(&x, false))
-            .sum();
+        let (model, x) = (&*self.model, &self.state.x);
+        let sets = model.constraint_sets().zip(&mut self.work.projections);
+        let elastic: f64 = sets.map(|(c, proj)| c.project(x, false, proj)).sum::<f64>()
+            + model
+                .attachments
+                .as_ref()
+                .map_or(0.0, |a| a.energy(x, &self.state.targets));
         kinetic + potential + elastic
     }
 

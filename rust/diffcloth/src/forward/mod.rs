@@ -8,25 +8,25 @@ use crate::config::SceneConfig;
 use crate::contact::{BranchCounts, Contact, ContactSet, ContactSettings};
 use crate::delassus::Delassus;
 use crate::effects::Effects;
-use crate::energy::{bending, Attachments, PdConstraints, Stretch};
+use crate::energy::{PdConstraints, Projections, Stretch};
 use crate::error::Result;
 use crate::forces::Wind;
-use crate::linalg::SpdFactor;
 use crate::mesh::TriMesh;
 use crate::params::{Params, SolverSettings};
 use crate::profile::Profile;
-use crate::scene::{
-    attachment_nodes, build_mesh, build_obstacles, build_self_collision, contact_settings,
-    params_from_config, solver_from_config, strain_limits,
-};
+use crate::scene::solver_from_config;
 use crate::tape::Tape;
 use crate::Vec3;
+use std::sync::Arc;
 
 mod detection;
 mod diagnostics;
+mod model;
 mod pd;
 mod state;
 mod step;
+
+pub use model::Model;
 
 /// What one forward step did.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -46,129 +46,117 @@ pub struct StepInput<'a> {
     pub external_forces: Option<&'a [Vec3]>,
 }
 
+/// A simulator: a shared [`Model`], its own [`State`] and [`Workspace`], and what it records.
 pub struct Simulator {
-    config: SceneConfig,
-    mesh: TriMesh,
-    handles: Vec<usize>,
-    effects: Effects,
-    params: Params,
+    model: Arc<Model>,
+    state: State,
+    work: Workspace,
     solver: SolverSettings,
-    node_area: Vec<f64>,
-    mass: Vec<f64>,
-    stretch: Option<Stretch>,
-    /// The bending model the scene selects (see `energy::bending`).
-    bend: Option<Box<dyn PdConstraints>>,
-    attachments: Option<Attachments>,
-    wind: Option<Wind>,
-    obstacles: Vec<Obstacle>,
-    self_collision: Option<SelfCollision>,
-    contact_settings: ContactSettings,
-    contacts: ContactSet,
-    /// The step's Delassus operator (contact response `delassus` only).
-    delassus: Delassus,
-    /// Scratch of the contact detection: velocities that set each node's reach, and which
-    /// nodes have a contact with the obstacle being checked.
-    detect_velocity: Vec<Vec3>,
-    covered: Vec<bool>,
-    factor: SpdFactor,
-    // State.
-    x: Vec<Vec3>,
-    v: Vec<Vec3>,
-    time: f64,
-    step_count: u64,
-    // Work buffers, allocated once.
-    y: Vec<Vec3>,
-    inertia_rhs: Vec<Vec3>,
-    iterate: Vec<Vec3>,
-    mapped: Vec<Vec3>,
-    /// `G(x_k)` kept while a safeguarded extrapolation is tried.
-    previous_mapped: Vec<Vec3>,
-    update: Vec<Vec3>,
-    extrapolated: Vec<Vec3>,
-    anderson: Anderson,
     trace: Option<Vec<(f64, f64)>>,
-    tape: Option<Tape>,
+    recording: Option<Recording>,
     profile: Profile,
     last: StepStats,
 }
 
-impl Simulator {
-    pub fn new(config: &SceneConfig) -> Result<Self> {
-        let effects = Effects::from_config(config)?;
-        let placed = build_mesh(config)?;
-        let mesh = placed.mesh.clone();
-        let n = mesh.num_vertices();
-        let params = params_from_config(config)?;
-        let solver = solver_from_config(&config.solver)?;
-        let [lo, hi] = strain_limits(&config.material)?;
-        let node_area = mesh.vertex_areas();
-        let stretch = effects
-            .stretch
-            .then(|| Stretch::new(&mesh, params.k_stretch, lo, hi));
-        let bend = effects.bend.then(|| bending(&mesh, params.k_bend));
-        let attachments = match (&config.attachments, effects.attachments) {
-            (Some(a), true) => {
-                let nodes = attachment_nodes(a, &placed)?;
-                let targets = nodes.iter().map(|&j| mesh.positions[j]).collect();
-                Some(Attachments::new(nodes, params.k_attach, targets))
-            }
-            _ => None,
-        };
-        let wind = match (&config.wind, effects.wind) {
-            (Some(w), true) => Some(Wind::new(w, &mesh.positions, &node_area)?),
-            _ => None,
-        };
-        let obstacles = if effects.obstacle_contact {
-            build_obstacles(&config.obstacles)?
-        } else {
-            Vec::new()
-        };
-        let self_collision = match (&config.self_collision, effects.self_collision) {
-            (Some(sc), true) => Some(build_self_collision(sc, &mesh)?),
-            _ => None,
-        };
-        let contact_settings = contact_settings(config, &effects)?;
-        let mass: Vec<f64> = node_area.iter().map(|a| params.density * a).collect();
-        let mut sim = Self {
-            config: config.clone(),
-            handles: placed.handles,
-            effects,
-            solver,
-            mass,
-            stretch,
-            bend,
-            attachments,
-            wind,
-            obstacles,
-            self_collision,
-            contact_settings,
+/// What changes every step: positions, velocities, time and the attachment targets.
+#[derive(Debug, Clone)]
+pub(crate) struct State {
+    pub(crate) x: Vec<Vec3>,
+    pub(crate) v: Vec<Vec3>,
+    pub(crate) time: f64,
+    pub(crate) step_count: u64,
+    /// Attachment targets in effect (one per attached node).
+    pub(crate) targets: Vec<Vec3>,
+}
+
+/// Every per-step and per-iteration buffer, allocated once per simulator.
+pub(crate) struct Workspace {
+    pub(crate) contacts: ContactSet,
+    /// The step's Delassus operator (contact response `delassus` only).
+    pub(crate) delassus: Delassus,
+    /// Scratch of the contact detection: velocities that set each node's reach, and which
+    /// nodes have a contact with the obstacle being checked.
+    pub(crate) detect_velocity: Vec<Vec3>,
+    pub(crate) covered: Vec<bool>,
+    pub(crate) y: Vec<Vec3>,
+    pub(crate) inertia_rhs: Vec<Vec3>,
+    pub(crate) iterate: Vec<Vec3>,
+    pub(crate) mapped: Vec<Vec3>,
+    /// `G(x_k)` kept while a safeguarded extrapolation is tried.
+    pub(crate) previous_mapped: Vec<Vec3>,
+    pub(crate) update: Vec<Vec3>,
+    pub(crate) extrapolated: Vec<Vec3>,
+    pub(crate) anderson: Anderson,
+    /// Each constraint set's projections (in `Model::constraint_sets` order).
+    pub(crate) projections: Vec<Projections>,
+    /// Work rows of the factor's solve.
+    pub(crate) solve_rows: Vec<Vec3>,
+    /// The targets before this step's inputs (restored if the step diverges).
+    pub(crate) previous_targets: Vec<Vec3>,
+}
+
+impl Workspace {
+    fn new(model: &Model, history: usize) -> Self {
+        let n = model.num_nodes();
+        let zeros = vec![Vec3::zeros(); n];
+        Self {
             contacts: ContactSet::default(),
             delassus: Delassus::default(),
             detect_velocity: Vec::with_capacity(n),
             covered: Vec::with_capacity(n),
-            factor: SpdFactor::new(1, &[(0, 0, 1.0)])?,
-            x: mesh.positions.clone(),
-            v: vec![Vec3::zeros(); n],
+            y: zeros.clone(),
+            inertia_rhs: zeros.clone(),
+            iterate: zeros.clone(),
+            mapped: zeros.clone(),
+            previous_mapped: zeros.clone(),
+            update: zeros.clone(),
+            extrapolated: zeros.clone(),
+            anderson: Anderson::new(history, n),
+            projections: model.constraint_sets().map(|c| c.new_projections()).collect(),
+            solve_rows: zeros,
+            previous_targets: Vec::new(),
+        }
+    }
+}
+
+/// A tape and what it was recorded with: backward linearizes with this model (not whatever
+/// the simulator holds by then) and replays checkpointed segments with these settings.
+pub(crate) struct Recording {
+    pub(crate) tape: Tape,
+    pub(crate) model: Arc<Model>,
+    pub(crate) solver: SolverSettings,
+    /// The first recorded step taken with another model (a parameter changed) or, for a
+    /// checkpointed tape, other solver settings: such a tape has no single linearization.
+    pub(crate) changed_at: Option<usize>,
+}
+
+impl Simulator {
+    pub fn new(config: &SceneConfig) -> Result<Self> {
+        let solver = solver_from_config(&config.solver)?;
+        Ok(Self::from_model(Arc::new(Model::new(config)?), solver))
+    }
+
+    /// A simulator on a shared model (no factorization: the model's is used), at the rest
+    /// state.
+    pub fn from_model(model: Arc<Model>, solver: SolverSettings) -> Self {
+        let x = model.mesh.positions.clone();
+        let state = State {
+            targets: model.rest_targets(&x),
+            v: vec![Vec3::zeros(); x.len()],
+            x,
             time: 0.0,
             step_count: 0,
-            y: vec![Vec3::zeros(); n],
-            inertia_rhs: vec![Vec3::zeros(); n],
-            iterate: vec![Vec3::zeros(); n],
-            mapped: vec![Vec3::zeros(); n],
-            previous_mapped: vec![Vec3::zeros(); n],
-            update: vec![Vec3::zeros(); n],
-            extrapolated: vec![Vec3::zeros(); n],
-            anderson: Anderson::new(config.solver.history, n),
+        };
+        Self {
+            work: Workspace::new(&model, solver.history),
+            state,
+            model,
+            solver,
             trace: None,
-            tape: None,
+            recording: None,
             profile: Profile::default(),
             last: StepStats::default(),
-            node_area,
-            params,
-            mesh,
-        };
-        sim.factor = SpdFactor::new(n, &sim.system_triplets())?;
-        Ok(sim)
+        }
     }
 
     /// Loads a TOML scene file.
@@ -176,83 +164,56 @@ impl Simulator {
         Self::new(&SceneConfig::from_toml_file(path)?)
     }
 
-    /// Every constraint set the scene simulates, in a fixed order.
+    /// The model this simulator steps (share it with [`Simulator::from_model`]).
+    pub fn model(&self) -> &Arc<Model> {
+        &self.model
+    }
+
     pub(crate) fn constraint_sets(&self) -> impl Iterator<Item = &dyn PdConstraints> {
-        let s = self.stretch.as_ref().map(|c| c as &dyn PdConstraints);
-        let b = self.bend.as_deref();
-        let a = self.attachments.as_ref().map(|c| c as &dyn PdConstraints);
-        [s, b, a].into_iter().flatten()
-    }
-
-    fn constraint_sets_mut(&mut self) -> impl Iterator<Item = &mut dyn PdConstraints> {
-        let s = self.stretch.as_mut().map(|c| c as &mut dyn PdConstraints);
-        let b = self
-            .bend
-            .as_deref_mut()
-            .map(|c| c as &mut dyn PdConstraints);
-        let a = self
-            .attachments
-            .as_mut()
-            .map(|c| c as &mut dyn PdConstraints);
-        [s, b, a].into_iter().flatten()
-    }
-
-    /// Triplets of `P_s = M / h^2 + sum_i w_i A_i^T A_i`.
-    fn system_triplets(&mut self) -> Vec<(usize, usize, f64)> {
-        let inv_h2 = 1.0 / (self.params.h * self.params.h);
-        let mut t: Vec<(usize, usize, f64)> = self
-            .mass
-            .iter()
-            .enumerate()
-            .map(|(i, m)| (i, i, m * inv_h2))
-            .collect();
-        for c in self.constraint_sets() {
-            c.add_system_triplets(&mut t);
-        }
-        t
+        self.model.constraint_sets()
     }
 
     // ---- accessors -------------------------------------------------------------------------
 
     pub fn config(&self) -> &SceneConfig {
-        &self.config
+        &self.model.config
     }
     pub fn mesh(&self) -> &TriMesh {
-        &self.mesh
+        &self.model.mesh
     }
     pub fn handles(&self) -> &[usize] {
-        &self.handles
+        &self.model.handles
     }
     pub fn effects(&self) -> Effects {
-        self.effects
+        self.model.effects
     }
     pub fn params(&self) -> &Params {
-        &self.params
+        &self.model.params
     }
     pub fn solver(&self) -> &SolverSettings {
         &self.solver
     }
     pub fn num_nodes(&self) -> usize {
-        self.mesh.num_vertices()
+        self.model.num_nodes()
     }
     pub fn positions(&self) -> &[Vec3] {
-        &self.x
+        &self.state.x
     }
     pub fn velocities(&self) -> &[Vec3] {
-        &self.v
+        &self.state.v
     }
     pub fn masses(&self) -> &[f64] {
-        &self.mass
+        &self.model.mass
     }
     pub fn time(&self) -> f64 {
-        self.time
+        self.state.time
     }
     pub fn step_count(&self) -> u64 {
-        self.step_count
+        self.state.step_count
     }
     /// `(stored values of the Cholesky factor, supernodal?)` of the system matrix.
     pub fn factor_stats(&self) -> (usize, bool) {
-        self.factor.factor_stats()
+        self.model.factor.factor_stats()
     }
     pub fn profile(&self) -> &Profile {
         &self.profile
@@ -264,63 +225,69 @@ impl Simulator {
         self.last
     }
     pub fn stretch(&self) -> Option<&Stretch> {
-        self.stretch.as_ref()
+        self.model.stretch.as_ref()
     }
     pub fn bend(&self) -> Option<&dyn PdConstraints> {
-        self.bend.as_deref()
+        self.model.bend.as_deref()
     }
     pub fn wind(&self) -> Option<&Wind> {
-        self.wind.as_ref()
+        self.model.wind.as_ref()
     }
     /// Each node's share of the rest area (m^2); mass = density x area.
     pub fn node_areas(&self) -> &[f64] {
-        &self.node_area
+        &self.model.node_area
     }
-    pub(crate) fn factor(&self) -> &SpdFactor {
-        &self.factor
+    pub(crate) fn factor(&self) -> &crate::linalg::SpdFactor {
+        &self.model.factor
     }
     /// Starts (clearing any previous tape) or stops recording steps for `backward`.
     pub fn set_recording(&mut self, on: bool) {
-        self.tape = on.then(Tape::default);
+        self.recording = on.then(|| self.new_recording(Tape::default()));
     }
 
     /// Starts a checkpointed recording: one state every `every` steps plus each step's inputs;
     /// `backward` re-simulates one segment at a time (same gradients, bounded memory).
     pub fn set_recording_checkpointed(&mut self, every: usize) {
-        self.tape = Some(Tape::checkpointed(every));
+        self.recording = Some(self.new_recording(Tape::checkpointed(every)));
     }
 
-    pub(crate) fn attachments_mut(&mut self) -> Option<&mut Attachments> {
-        self.attachments.as_mut()
+    fn new_recording(&self, tape: Tape) -> Recording {
+        Recording {
+            tape,
+            model: self.model.clone(),
+            solver: self.solver.clone(),
+            changed_at: None,
+        }
+    }
+
+    pub(crate) fn recording(&self) -> Option<&Recording> {
+        self.recording.as_ref()
     }
 
     pub(crate) fn take_tape(&mut self) -> Option<Tape> {
-        self.tape.take()
+        self.recording.take().map(|r| r.tape)
     }
 
-    pub(crate) fn put_tape(&mut self, tape: Option<Tape>) {
-        self.tape = tape;
-    }
     pub fn tape(&self) -> Option<&Tape> {
-        self.tape.as_ref()
+        self.recording.as_ref().map(|r| &r.tape)
     }
     /// The current step's contacts (frames, branches and impulses of the last step).
     pub fn contacts(&self) -> &[Contact] {
-        &self.contacts.contacts
+        &self.work.contacts.contacts
     }
     pub fn obstacles(&self) -> &[Obstacle] {
-        &self.obstacles
+        &self.model.obstacles
     }
     pub fn contact_settings(&self) -> &ContactSettings {
-        &self.contact_settings
+        &self.model.contact_settings
     }
     pub fn self_collision(&self) -> Option<&SelfCollision> {
-        self.self_collision.as_ref()
+        self.model.self_collision.as_ref()
     }
     pub fn attachment_nodes(&self) -> &[usize] {
-        self.attachments.as_ref().map_or(&[], |a| a.nodes())
+        self.model.attachment_nodes()
     }
     pub fn attachment_targets(&self) -> &[Vec3] {
-        self.attachments.as_ref().map_or(&[], |a| a.targets())
+        &self.state.targets
     }
 }

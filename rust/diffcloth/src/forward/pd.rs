@@ -14,62 +14,69 @@ impl Simulator {
         let start = Instant::now();
         let parallel = self.solver.parallel;
         let x = std::mem::take(self.buffer(which));
-        let mut rhs = std::mem::take(&mut self.update);
-        rhs.copy_from_slice(&self.inertia_rhs);
-        let inv_2h2 = 0.5 / (self.params.h * self.params.h);
+        let mut rhs = std::mem::take(&mut self.work.update);
+        rhs.copy_from_slice(&self.work.inertia_rhs);
+        let inv_2h2 = 0.5 / (self.model.params.h * self.model.params.h);
         let mut energy: f64 = x
             .iter()
-            .zip(&self.y)
-            .zip(&self.mass)
+            .zip(&self.work.y)
+            .zip(&self.model.mass)
             .map(|((xi, yi), m)| m * (xi - yi).norm_squared())
             .sum::<f64>()
             * inv_2h2;
-        for c in self.constraint_sets_mut() {
-            energy += c.project(&x, parallel);
-            c.add_rhs(&mut rhs);
+        let model = &*self.model;
+        for (c, proj) in model.constraint_sets().zip(&mut self.work.projections) {
+            energy += c.project(&x, parallel, proj);
+            c.add_rhs(proj, &mut rhs);
+        }
+        if let Some(a) = &model.attachments {
+            energy += a.energy(&x, &self.state.targets);
+            a.add_rhs(&self.state.targets, &mut rhs);
         }
         *self.buffer(which) = x;
-        self.update = rhs;
+        self.work.update = rhs;
         self.profile.local += start.elapsed();
         energy
     }
 
     pub(super) fn buffer(&mut self, which: Buffer) -> &mut Vec<Vec3> {
         match which {
-            Buffer::Iterate => &mut self.iterate,
-            Buffer::Extrapolated => &mut self.extrapolated,
+            Buffer::Iterate => &mut self.work.iterate,
+            Buffer::Extrapolated => &mut self.work.extrapolated,
         }
     }
 
     /// Global step: `mapped = P_s^{-1} rhs` (rhs in `update`), then `update = mapped - iterate`.
     /// Returns the RMS of the update.
     pub(super) fn global_step(&mut self) -> f64 {
-        let factor = &mut self.factor;
+        let factor = &self.model.factor;
+        let work = &mut self.work;
         timed(&mut self.profile.global, || {
-            factor.solve_xyz(&mut self.update)
+            factor.solve_xyz(&mut work.update, &mut work.solve_rows)
         });
         if self.delassus_response() {
             let start = Instant::now();
-            self.delassus.respond(
-                &mut self.update,
-                &self.x,
-                self.params.h,
-                &mut self.contacts.contacts,
+            self.work.delassus.respond(
+                &mut self.work.update,
+                &self.state.x,
+                self.model.params.h,
+                &mut self.work.contacts.contacts,
             );
             self.profile.contact_solve += start.elapsed();
         }
         let mut sum = 0.0;
         for ((u, g), x) in self
+            .work
             .update
             .iter_mut()
-            .zip(self.mapped.iter_mut())
-            .zip(&self.iterate)
+            .zip(self.work.mapped.iter_mut())
+            .zip(&self.work.iterate)
         {
             *g = *u;
             *u -= x;
             sum += u.norm_squared();
         }
-        (sum / (3 * self.iterate.len()) as f64).sqrt()
+        (sum / (3 * self.work.iterate.len()) as f64).sqrt()
     }
 
     /// PD iterations from the initial guess `y`. Each iteration maps the iterate x to
@@ -94,20 +101,20 @@ impl Simulator {
     /// iteration cap); there E leaves out the contact forces, which only the fixed point
     /// must satisfy.
     pub(super) fn solve_pd(&mut self) -> StepStats {
-        self.iterate.copy_from_slice(&self.y);
-        self.anderson.reset();
+        self.work.iterate.copy_from_slice(&self.work.y);
+        self.work.anderson.reset();
         if let Some(t) = self.trace.as_mut() {
             t.clear();
         }
         // Recorded steps converge further: the adjoint needs the converged solution.
         let user_tol = self.solver.tolerance;
-        let tol = if self.tape.is_some() {
+        let tol = if self.recording.is_some() {
             user_tol.min(self.solver.record_tolerance)
         } else {
             user_tol
         };
         let mut reached_user_tol: Option<usize> = None;
-        let max_it = if self.tape.is_some() {
+        let max_it = if self.recording.is_some() {
             self.solver
                 .max_iterations
                 .max(self.solver.record_max_iterations)
@@ -129,26 +136,27 @@ impl Simulator {
         let mut accelerate = self.solver.anderson;
         let mut best_residual = residual;
         let mut best_at = iterations;
-        let stall_window = 2 * self.anderson.history() + 4;
+        let stall_window = 2 * self.work.anderson.history() + 4;
         while residual > tol && iterations < max_it {
             // While no contact pushes (all take off at the iterate), E is the exact objective
             // and the energy guard applies; the residual guard only where contact forces act.
-            let energy_guard = self.contacts.all_take_off();
+            let energy_guard = self.work.contacts.all_take_off();
             let mut accepted = false;
             let mut extrapolated_by_anderson = false;
             let (previous_residual, previous_energy) = (residual, energy);
             if escape_scale > 1.0 {
                 for ((e, x), u) in self
+                    .work
                     .extrapolated
                     .iter_mut()
-                    .zip(&self.iterate)
-                    .zip(&self.update)
+                    .zip(&self.work.iterate)
+                    .zip(&self.work.update)
                 {
                     *e = x + escape_scale * u;
                 }
                 let trial = self.local_step(Buffer::Extrapolated);
                 if trial < energy {
-                    std::mem::swap(&mut self.iterate, &mut self.extrapolated);
+                    std::mem::swap(&mut self.work.iterate, &mut self.work.extrapolated);
                     energy = trial;
                     accepted = true;
                     escape_scale = (2.0 * escape_scale).min(ESCAPE_MAX_SCALE);
@@ -157,15 +165,16 @@ impl Simulator {
                     escape_scale = 1.0;
                 }
             } else if accelerate {
-                self.anderson.push(&self.update, &self.mapped);
+                self.work.anderson.push(&self.work.update, &self.work.mapped);
                 if self
+                    .work
                     .anderson
-                    .extrapolate(&self.update, &self.mapped, &mut self.extrapolated)
+                    .extrapolate(&self.work.update, &self.work.mapped, &mut self.work.extrapolated)
                 {
                     let trial = self.local_step(Buffer::Extrapolated);
                     if energy_guard {
                         if trial < energy {
-                            std::mem::swap(&mut self.iterate, &mut self.extrapolated);
+                            std::mem::swap(&mut self.work.iterate, &mut self.work.extrapolated);
                             energy = trial;
                             accepted = true;
                             extrapolated_by_anderson = true;
@@ -173,8 +182,8 @@ impl Simulator {
                     } else {
                         // Residual guard: evaluate G at the extrapolation, keep it if better.
                         self.solve_contacts(Buffer::Extrapolated);
-                        std::mem::swap(&mut self.iterate, &mut self.extrapolated);
-                        std::mem::swap(&mut self.mapped, &mut self.previous_mapped);
+                        std::mem::swap(&mut self.work.iterate, &mut self.work.extrapolated);
+                        std::mem::swap(&mut self.work.mapped, &mut self.work.previous_mapped);
                         let trial_residual = self.global_step();
                         iterations += 1;
                         if trial_residual < residual {
@@ -190,17 +199,17 @@ impl Simulator {
                             continue;
                         }
                         // Undo: back to x_k and G(x_k).
-                        std::mem::swap(&mut self.iterate, &mut self.extrapolated);
-                        std::mem::swap(&mut self.mapped, &mut self.previous_mapped);
+                        std::mem::swap(&mut self.work.iterate, &mut self.work.extrapolated);
+                        std::mem::swap(&mut self.work.mapped, &mut self.work.previous_mapped);
                     }
                     if !accepted {
                         self.profile.acceleration_rejections += 1;
-                        self.anderson.reset();
+                        self.work.anderson.reset();
                     }
                 }
             }
             if !accepted {
-                self.iterate.copy_from_slice(&self.mapped);
+                self.work.iterate.copy_from_slice(&self.work.mapped);
                 energy = self.local_step(Buffer::Iterate);
             }
             self.solve_contacts(Buffer::Iterate);
@@ -230,7 +239,7 @@ impl Simulator {
                 escape_scale = 1.0;
             } else if growing >= 2 && escape_scale == 1.0 {
                 escape_scale = 2.0;
-                self.anderson.reset();
+                self.work.anderson.reset();
             }
         }
         if let Some(at) = reached_user_tol {
@@ -240,25 +249,25 @@ impl Simulator {
             iterations,
             residual,
             converged: residual <= tol,
-            contacts: self.contacts.counts(),
+            contacts: self.work.contacts.counts(),
         }
     }
 
     /// Adds this iteration's contact forces at the iterate to the right-hand side in `update`.
     pub(super) fn solve_contacts(&mut self, which: Buffer) {
         // (The Delassus response acts after the global solve instead.)
-        if self.contacts.is_empty() || self.delassus_response() {
+        if self.work.contacts.is_empty() || self.delassus_response() {
             return;
         }
         let start = Instant::now();
         let x = std::mem::take(self.buffer(which));
-        self.contacts.solve(
+        self.work.contacts.solve(
             &x,
-            &self.x,
-            &self.mass,
-            self.params.h,
-            self.factor.matrix(),
-            &mut self.update,
+            &self.state.x,
+            &self.model.mass,
+            self.model.params.h,
+            self.model.factor.matrix(),
+            &mut self.work.update,
         );
         *self.buffer(which) = x;
         self.profile.contact_solve += start.elapsed();

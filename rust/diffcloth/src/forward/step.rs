@@ -4,7 +4,8 @@
 use super::{Simulator, StepInput, StepStats};
 use crate::error::{Error, Result};
 use crate::params::check_nodes;
-use crate::tape::CompletedStep;
+use crate::tape::{CompletedStep, Tape};
+use std::sync::Arc;
 use crate::Vec3;
 use std::time::Instant;
 
@@ -14,7 +15,7 @@ impl Simulator {
         let start = Instant::now();
         let p0 = self.profile.clone();
         self.prepare(input)?;
-        if self.effects.has_contact() {
+        if self.model.effects.has_contact() {
             self.detect_contacts(false);
         }
         let mut stats = self.solve_pd();
@@ -22,37 +23,30 @@ impl Simulator {
         // speeds up within the step (a snap-through) can end inside an obstacle it was never
         // a candidate for (the Hat: 3.6 cm in one step, 9.8 mm deep in the head); then detect
         // again with the step's own motion and solve the step once more.
-        if self.effects.obstacle_contact && self.missed_obstacle_contact() {
+        if self.model.effects.obstacle_contact && self.missed_obstacle_contact() {
             self.profile.redetections += 1;
             self.detect_contacts(true);
             stats = self.solve_pd();
         }
         // The PD result is in `mapped`.
-        let h = self.params.h;
-        if !self.mapped.iter().all(|p| p.iter().all(|c| c.is_finite())) {
+        let h = self.model.params.h;
+        if !self.work.mapped.iter().all(|p| p.iter().all(|c| c.is_finite())) {
+            // Roll back everything the call set: the targets too, or the next plain step
+            // would diverge again.
+            std::mem::swap(&mut self.state.targets, &mut self.work.previous_targets);
             return Err(Error::Diverged(format!(
                 "non-finite positions at step {}; state left at the previous step",
-                self.step_count
+                self.state.step_count
             )));
         }
-        if let Some(tape) = self.tape.as_mut() {
-            tape.push(&CompletedStep {
-                x_prev: &self.x,
-                v_prev: &self.v,
-                x_next: &self.mapped,
-                targets: self.attachments.as_ref().map(|a| a.targets()),
-                forces: input.external_forces,
-                time: self.time,
-                contacts: &self.contacts.contacts,
-                residual: stats.residual,
-            });
-        }
-        for ((x, v), xn) in self.x.iter_mut().zip(self.v.iter_mut()).zip(&self.mapped) {
+        self.record_step(&input, &stats);
+        let state = &mut self.state;
+        for ((x, v), xn) in state.x.iter_mut().zip(state.v.iter_mut()).zip(&self.work.mapped) {
             *v = (xn - *x) / h;
             *x = *xn;
         }
-        self.time += h;
-        self.step_count += 1;
+        self.state.time += h;
+        self.state.step_count += 1;
         self.last = stats;
         let p = &mut self.profile;
         p.steps += 1;
@@ -76,16 +70,15 @@ impl Simulator {
     pub fn prepare(&mut self, input: StepInput<'_>) -> Result<()> {
         let n = self.num_nodes();
         if let Some(t) = input.attachment_targets {
-            let Some(a) = self.attachments.as_mut() else {
+            if self.model.attachments.is_none() {
                 return Err(Error::Input(
                     "attachment targets given but the scene has no attachments".into(),
                 ));
-            };
-            check_nodes("attachment_targets", t, a.nodes().len())?;
-            a.set_targets(t);
+            }
+            check_nodes("attachment_targets", t, self.state.targets.len())?;
         }
         if let Some(f) = input.external_forces {
-            if !self.effects.external_forces {
+            if !self.model.effects.external_forces {
                 return Err(Error::Input(
                     "external forces given but 'external_forces' is not in the scene's effects"
                         .into(),
@@ -93,28 +86,64 @@ impl Simulator {
             }
             check_nodes("external_forces", f, n)?;
         }
-        let h = self.params.h;
+        // Validated: apply the targets, keeping the old ones for a rollback.
+        let previous = &mut self.work.previous_targets;
+        previous.clear();
+        previous.extend_from_slice(&self.state.targets);
+        if let Some(t) = input.attachment_targets {
+            self.state.targets.copy_from_slice(t);
+        }
+        let h = self.model.params.h;
         // Accumulate forces in `y` first, then turn them into the prediction.
-        let f = &mut self.y;
+        let f = &mut self.work.y;
         match input.external_forces {
             Some(ext) => f.copy_from_slice(ext),
             None => f.iter_mut().for_each(|fi| *fi = Vec3::zeros()),
         }
-        if self.effects.gravity {
-            let g = self.params.gravity;
+        if self.model.effects.gravity {
+            let g = self.model.params.gravity;
             f.iter_mut()
-                .zip(&self.mass)
+                .zip(&self.model.mass)
                 .for_each(|(fi, m)| *fi += *m * g);
         }
-        if let Some(w) = &self.wind {
-            w.add_forces(self.time, f);
+        if let Some(w) = &self.model.wind {
+            w.add_forces(self.state.time, f);
         }
         let inv_h2 = 1.0 / (h * h);
         for i in 0..n {
-            let y = self.x[i] + h * self.v[i] + (h * h / self.mass[i]) * self.y[i];
-            self.y[i] = y;
-            self.inertia_rhs[i] = self.mass[i] * inv_h2 * y;
+            let (x, v, m) = (self.state.x[i], self.state.v[i], self.model.mass[i]);
+            let y = x + h * v + (h * h / m) * self.work.y[i];
+            self.work.y[i] = y;
+            self.work.inertia_rhs[i] = m * inv_h2 * y;
         }
         Ok(())
+    }
+
+    /// Hands the completed step to the tape, noting when it was taken with another model (or,
+    /// checkpointed, other solver settings) than the recording's first steps.
+    fn record_step(&mut self, input: &StepInput<'_>, stats: &StepStats) {
+        let Some(rec) = self.recording.as_mut() else {
+            return;
+        };
+        let checkpointed = matches!(rec.tape, Tape::Checkpointed { .. });
+        if rec.tape.is_empty() {
+            rec.model = self.model.clone();
+            rec.solver = self.solver.clone();
+            rec.changed_at = None;
+        } else if rec.changed_at.is_none()
+            && (!Arc::ptr_eq(&rec.model, &self.model) || (checkpointed && rec.solver != self.solver))
+        {
+            rec.changed_at = Some(rec.tape.len());
+        }
+        rec.tape.push(&CompletedStep {
+            x_prev: &self.state.x,
+            v_prev: &self.state.v,
+            x_next: &self.work.mapped,
+            targets: self.model.attachments.is_some().then_some(&self.state.targets[..]),
+            forces: input.external_forces,
+            time: self.state.time,
+            contacts: &self.work.contacts.contacts,
+            residual: stats.residual,
+        });
     }
 }
