@@ -11,10 +11,12 @@
 
 mod attachment;
 mod bend;
+mod bend_edge;
 mod stretch;
 
 pub use attachment::Attachments;
 pub use bend::Bend;
+pub use bend_edge::BendEdge;
 pub use stretch::Stretch;
 
 use crate::mesh::TriMesh;
