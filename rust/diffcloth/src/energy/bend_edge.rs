@@ -366,9 +366,9 @@ mod tests {
             }
             forces.push(g);
         }
-        for a in 0..4 {
-            assert!((forces[1][a] - 2.0 * forces[0][a]).norm() < 1e-12);
-            assert!(forces[0][a].norm() > 0.05, "the fold is resisted");
+        for (g1, g2) in forces[0].iter().zip(&forces[1]) {
+            assert!((g2 - 2.0 * g1).norm() < 1e-12);
+            assert!(g1.norm() > 0.05, "the fold is resisted");
         }
     }
 
