@@ -12,10 +12,10 @@
 //! w0 = cot02 + cot03,  w1 = cot12 + cot13,  w2 = -(cot02 + cot12),  w3 = -(cot03 + cot13)
 //! ```
 //!
-//! `sum_j w_j = 0` (translations are free) and `e(X_rest) = 0` on a planar rest hinge. The projection rescales `e` to its rest
-//! length `n = |e(X_rest)|` (`p = n e / |e|`; `p = 0` when `n <= 1e-6` m, as the reference, so a
-//! flat rest shape gives the quadratic model `E = w/2 |e|^2`), so a curved rest shape is
-//! force-free at rest.
+//! `sum_j w_j = 0` (translations are free) and `e(X_rest) = 0` on a planar rest hinge. The
+//! projection rescales `e` to its rest length `n = |e(X_rest)|` (`p = n e / |e|`; `p = 0` when
+//! `n <= 1e-6` m, as the reference, so a flat rest shape gives the quadratic model
+//! `E = w/2 |e|^2`), so a curved rest shape is force-free at rest.
 //!
 //! Weight: the reference writes each constraint as `(1/2) |W (A x - p)|^2` with
 //! `W = sqrt(3 k_bend / (A0 + A1))` (its selector rows and projections both carry `W`, so its
