@@ -109,12 +109,28 @@ pub struct MaterialConfig {
     /// Stretch stiffness in N/m (weight = k_stretch x rest area). Default 0.
     #[serde(default)]
     pub k_stretch: f64,
-    /// Bending stiffness in N m (weight = k_bend x vertex area). Default 0.
+    /// Bending stiffness in N m (weights per [`BendModel`]). Default 0.
     #[serde(default)]
     pub k_bend: f64,
+    /// Which bending model `k_bend` drives (default: vertex).
+    #[serde(default)]
+    pub bend_model: BendModel,
     /// Principal-stretch limits `[s_min, s_max]`; `[1, 1]` (default) is as-rigid-as-possible.
     #[serde(default = "unit_limits")]
     pub strain_limits: [f64; 2],
+}
+
+/// The bending model (`material.bend_model`); both keep a curved rest shape force-free.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BendModel {
+    /// One constraint per interior edge (the reference DiffCloth code's model): the
+    /// cotangent stencil of the edge's two triangles, weight `3 k_bend / (A0 + A1)`.
+    Edge,
+    /// One constraint per interior vertex (default): the cotangent-Laplacian mean-curvature
+    /// vector, weight `k_bend x` mixed Voronoi area.
+    #[default]
+    Vertex,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -389,5 +405,25 @@ impl SceneConfig {
 
     pub fn has(&self, effect: Effect) -> bool {
         self.effects.contains(&effect)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn material(extra: &str) -> Result<SceneConfig> {
+        SceneConfig::from_toml_str(&format!(
+            "h = 0.01\neffects = []\n[mesh]\nkind = \"hat\"\n[material]\ndensity = 0.1\n{extra}"
+        ))
+    }
+
+    #[test]
+    fn bend_model_defaults_to_vertex_and_parses_edge() {
+        assert_eq!(material("").unwrap().material.bend_model, BendModel::Vertex);
+        let edge = material("bend_model = \"edge\"").unwrap();
+        assert_eq!(edge.material.bend_model, BendModel::Edge);
+        let err = material("bend_model = \"hinge\"").unwrap_err().to_string();
+        assert!(err.contains("hinge"), "{err}");
     }
 }

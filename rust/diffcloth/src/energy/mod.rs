@@ -11,18 +11,25 @@
 
 mod attachment;
 mod bend;
+mod bend_edge;
 mod stretch;
 
 pub use attachment::Attachments;
 pub use bend::Bend;
+pub use bend_edge::BendEdge;
 pub use stretch::Stretch;
 
+use crate::config::BendModel;
 use crate::mesh::TriMesh;
 use crate::Vec3;
 
-/// The bending constraints of a mesh (today the per-vertex model, [`Bend`]).
-pub fn bending(mesh: &TriMesh, k_bend: f64) -> Box<dyn PdConstraints> {
-    Box::new(Bend::new(mesh, k_bend))
+/// The bending constraints of a mesh in the scene's model: per interior edge ([`BendEdge`],
+/// the reference code's) or per interior vertex ([`Bend`]).
+pub fn bending(mesh: &TriMesh, k_bend: f64, model: BendModel) -> Box<dyn PdConstraints> {
+    match model {
+        BendModel::Edge => Box::new(BendEdge::new(mesh, k_bend)),
+        BendModel::Vertex => Box::new(Bend::new(mesh, k_bend)),
+    }
 }
 
 /// Constraint sets below this size are projected on one thread: rayon's fork/join overhead

@@ -73,7 +73,9 @@ impl Model {
         let stretch = effects
             .stretch
             .then(|| Stretch::new(&mesh, params.k_stretch, lo, hi));
-        let bend = effects.bend.then(|| bending(&mesh, params.k_bend));
+        let bend = effects
+            .bend
+            .then(|| bending(&mesh, params.k_bend, config.material.bend_model));
         let attachments = match (&config.attachments, effects.attachments) {
             (Some(a), true) => Some(Attachments::new(
                 attachment_nodes(a, &placed)?,
