@@ -11,6 +11,8 @@ import numpy as np
 import numpy.typing as npt
 
 __version__: str
+#: The differentiable physical parameters (the core's name table).
+PARAM_NAMES: list[str]
 
 class Simulator:
     """A cloth scene in the Rust core; arrays are float64 copies, one row per node."""

@@ -20,9 +20,11 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from diffcloth_gym import _core
 from diffcloth_gym.simulator import Simulator
 
-PARAM_NAMES = ("k_stretch", "k_bend", "k_attach", "density", "wind_omega", "wind_phi", "gravity", "wind_direction")
+#: The differentiable physical parameters (the core's name table, shared with set_params and backward).
+PARAM_NAMES = tuple(_core.PARAM_NAMES)
 
 
 def _np(t: torch.Tensor | None) -> np.ndarray | None:

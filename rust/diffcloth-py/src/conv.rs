@@ -2,7 +2,7 @@
 //! Python is a fresh copy: callers may keep or mutate it without touching the simulator.
 
 use crate::errors::InputError;
-use diffcloth::{Branch, Contact, ContactKind, Gradients, Profile, StepStats, Vec3};
+use diffcloth::{Branch, Contact, ContactKind, Gradients, Param, ParamValue, Profile, StepStats, Vec3};
 use numpy::ndarray::Array2;
 use numpy::{Element, PyArray2, PyReadonlyArray2, PyReadonlyArray3, ToPyArray};
 use pyo3::prelude::*;
@@ -148,20 +148,13 @@ pub(crate) fn gradients_dict<'py>(py: Python<'py>, g: &Gradients) -> PyResult<Bo
     };
     d.set_item("attachment_targets", per_step(&g.attachment_targets))?;
     d.set_item("external_forces", per_step(&g.external_forces))?;
-    for (k, v) in [
-        ("k_stretch", g.k_stretch),
-        ("k_bend", g.k_bend),
-        ("k_attach", g.k_attach),
-        ("density", g.density),
-        ("wind_omega", g.wind_omega),
-        ("wind_phi", g.wind_phi),
-    ] {
-        d.set_item(k, v)?;
+    for name in Param::ALL {
+        if let Some(value) = g.param(name) {
+            set_param_item(&d, name, value)?;
+        }
     }
     d.set_item("mu_obstacles", g.mu_obstacles.clone())?;
     d.set_item("mu_self", g.mu_self)?;
-    d.set_item("gravity", g.gravity.as_slice().to_vec())?;
-    d.set_item("wind_direction", g.wind_direction.as_slice().to_vec())?;
     d.set_item(
         "iterations",
         g.steps.iter().map(|s| s.iterations).collect::<Vec<_>>(),
@@ -182,4 +175,12 @@ pub(crate) fn gradients_dict<'py>(py: Python<'py>, g: &Gradients) -> PyResult<Bo
     d.set_item("profile", prof)?;
     d.set_item("warnings", g.warnings.clone())?;
     Ok(d)
+}
+
+/// `d[name] = value`: a float, or a list of 3 for vector parameters.
+pub(crate) fn set_param_item(d: &Bound<'_, PyDict>, name: Param, value: ParamValue) -> PyResult<()> {
+    match value {
+        ParamValue::Scalar(x) => d.set_item(name.name(), x),
+        ParamValue::Vector(v) => d.set_item(name.name(), v.as_slice().to_vec()),
+    }
 }

@@ -18,5 +18,12 @@ use pyo3::prelude::*;
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<simulator::PySimulator>()?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    // The differentiable parameters, from the core's one name table.
+    let names: Vec<&str> = diffcloth::Param::ALL
+        .into_iter()
+        .filter(|p| p.differentiable())
+        .map(diffcloth::Param::name)
+        .collect();
+    m.add("PARAM_NAMES", names)?;
     Ok(())
 }

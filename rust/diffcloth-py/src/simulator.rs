@@ -3,11 +3,11 @@
 
 use crate::conv::{
     contacts_dict, gradients_dict, nodes_to_py, pairs_to_py, profile_dict, read_nodes, read_steps,
-    stats_dict, triangles_to_py,
+    set_param_item, stats_dict, triangles_to_py,
 };
 use crate::errors::{guarded, InputError, ParameterError};
 use diffcloth::{
-    AdjointSolver, BackwardOptions, Params, SceneConfig, Simulator, SolverSettings, StepInput,
+    Acceleration, AdjointSolver, BackwardOptions, Param, ParamValue, Params, SceneConfig, Simulator, SolverSettings, StepInput,
     StepStats, Vec3,
 };
 use numpy::{PyArray2, PyReadonlyArray2, PyReadonlyArray3};
@@ -134,15 +134,9 @@ impl PySimulator {
     fn params<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let p = self.inner.params();
         let d = PyDict::new(py);
-        d.set_item("h", p.h)?;
-        d.set_item("density", p.density)?;
-        d.set_item("k_stretch", p.k_stretch)?;
-        d.set_item("k_bend", p.k_bend)?;
-        d.set_item("k_attach", p.k_attach)?;
-        d.set_item("gravity", p.gravity.as_slice().to_vec())?;
-        d.set_item("wind_direction", p.wind_direction.as_slice().to_vec())?;
-        d.set_item("wind_omega", p.wind_omega)?;
-        d.set_item("wind_phi", p.wind_phi)?;
+        for name in Param::ALL {
+            set_param_item(&d, name, p.get(name))?;
+        }
         Ok(d)
     }
 
@@ -153,33 +147,23 @@ impl PySimulator {
         if let Some(kwargs) = kwargs {
             for (key, value) in kwargs.iter() {
                 let key: String = key.extract()?;
-                let vec3 = |v: &Bound<'_, PyAny>| -> PyResult<Vec3> {
-                    let a: [f64; 3] = v
+                let name = Param::from_name(&key).ok_or_else(|| {
+                    ParameterError::new_err(format!(
+                        "unknown parameter {key:?}; known: {}",
+                        Param::names()
+                    ))
+                })?;
+                let value = if name.is_vector() {
+                    let a: [f64; 3] = value
                         .extract()
                         .map_err(|_| ParameterError::new_err(format!("{key} must be 3 numbers")))?;
-                    Ok(Vec3::from(a))
+                    ParamValue::Vector(Vec3::from(a))
+                } else {
+                    ParamValue::Scalar(value.extract().map_err(|_| {
+                        ParameterError::new_err(format!("{key} must be a number"))
+                    })?)
                 };
-                let scalar = |v: &Bound<'_, PyAny>| -> PyResult<f64> {
-                    v.extract()
-                        .map_err(|_| ParameterError::new_err(format!("{key} must be a number")))
-                };
-                match key.as_str() {
-                    "h" => p.h = scalar(&value)?,
-                    "density" => p.density = scalar(&value)?,
-                    "k_stretch" => p.k_stretch = scalar(&value)?,
-                    "k_bend" => p.k_bend = scalar(&value)?,
-                    "k_attach" => p.k_attach = scalar(&value)?,
-                    "gravity" => p.gravity = vec3(&value)?,
-                    "wind_direction" => p.wind_direction = vec3(&value)?,
-                    "wind_omega" => p.wind_omega = scalar(&value)?,
-                    "wind_phi" => p.wind_phi = scalar(&value)?,
-                    other => {
-                        return Err(ParameterError::new_err(format!(
-                            "unknown parameter {other:?}; known: h, density, k_stretch, k_bend, k_attach, \
-                             gravity, wind_direction, wind_omega, wind_phi"
-                        )))
-                    }
-                }
+                p.set(name, value).map_err(|e| ParameterError::new_err(e.to_string()))?;
             }
         }
         let sim = &mut self.inner;
@@ -191,7 +175,8 @@ impl PySimulator {
         let d = PyDict::new(py);
         d.set_item("max_iterations", s.max_iterations)?;
         d.set_item("tolerance", s.tolerance)?;
-        d.set_item("acceleration", if s.anderson { "anderson" } else { "none" })?;
+        let acceleration = if s.anderson { Acceleration::Anderson } else { Acceleration::None };
+        d.set_item("acceleration", acceleration.name())?;
         d.set_item("history", s.history)?;
         d.set_item("parallel", s.parallel)?;
         d.set_item("record_tolerance", s.record_tolerance)?;
@@ -216,11 +201,8 @@ impl PySimulator {
                     "parallel" => s.parallel = value.extract().map_err(|_| bad("a bool"))?,
                     "acceleration" => {
                         let a: String = value.extract().map_err(|_| bad("\"anderson\" or \"none\""))?;
-                        s.anderson = match a.as_str() {
-                            "anderson" => true,
-                            "none" => false,
-                            _ => return Err(bad("\"anderson\" or \"none\"")),
-                        };
+                        let a = Acceleration::from_name(&a).ok_or_else(|| bad("\"anderson\" or \"none\""))?;
+                        s.anderson = a == Acceleration::Anderson;
                     }
                     other => {
                         return Err(ParameterError::new_err(format!(

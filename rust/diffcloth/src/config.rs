@@ -1,5 +1,6 @@
-//! Scene configuration as read from `configs/*.toml` (or a Python dict). Unknown keys are
-//! errors that name the key: a typo must never silently fall back to a default.
+//! Scene configuration as read from the scene TOMLs (`diffcloth_gym/configs/*.toml`) or a
+//! Python dict. Unknown keys are errors that name the key: a typo must never silently fall
+//! back to a default.
 
 use crate::error::{Error, Result};
 use crate::mesh::GridPlane;
@@ -142,15 +143,36 @@ pub struct AttachmentConfig {
     /// Attached node indices, or
     #[serde(default)]
     pub nodes: Vec<usize>,
-    /// a named selection: "top_corners" (grid), "handles" (garments).
+    /// a named selection.
     #[serde(default)]
-    pub select: Option<String>,
+    pub select: Option<Selection>,
+}
+
+/// `attachments.select`: a named set of nodes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Selection {
+    /// The two highest nodes at the left and right ends of the top edge (grids).
+    TopCorners,
+    /// The garment's handles (its suggested end-effector nodes).
+    Handles,
 }
 
 /// Wind after the paper's Appendix B (Eqn. 35 and the T-shirt sinusoid):
 /// `f_a(t) = 0.5 (sin(omega t + phi) + 1) k_a d`, scaled by the node's area if
 /// `per_area` (default: then `d` is a force per unit area and the scene's response does not
 /// depend on the mesh resolution), else applied per node as in the paper.
+/// `wind.profile`: the per-node factor `k_a`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WindProfile {
+    /// `k_a = 1` (default).
+    #[default]
+    Uniform,
+    /// `k_a = 1 /` the node's distance to the mesh centroid at rest (the paper's Flag).
+    InverseDistance,
+}
+
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct WindConfig {
@@ -162,10 +184,9 @@ pub struct WindConfig {
     /// Phase phi in rad.
     #[serde(default)]
     pub phi: f64,
-    /// "uniform" (k_a = 1, default) or "inverse_distance" (k_a = 1 / distance of the node to
-    /// the mesh centroid at the first step, as the paper's Flag).
-    #[serde(default = "default_profile")]
-    pub profile: String,
+    /// How the wind's strength varies over the cloth (default: uniform).
+    #[serde(default)]
+    pub profile: WindProfile,
     #[serde(default = "yes")]
     pub per_area: bool,
 }
@@ -274,6 +295,33 @@ pub struct SelfCollisionConfig {
     pub mu: f64,
 }
 
+/// `solver.acceleration`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Acceleration {
+    /// Energy-guarded Anderson acceleration (default).
+    #[default]
+    Anderson,
+    /// Plain local-global iterations.
+    None,
+}
+
+impl Acceleration {
+    /// The name used in configs and by the Python binding.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Anderson => "anderson",
+            Self::None => "none",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        [Self::Anderson, Self::None]
+            .into_iter()
+            .find(|a| a.name() == name)
+    }
+}
+
 /// PD solver settings: the accuracy knobs.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -297,9 +345,9 @@ pub struct SolverConfig {
     /// Iteration cap of recorded steps (default 2000; the larger of this and max_iterations).
     #[serde(default = "default_record_max_iterations")]
     pub record_max_iterations: usize,
-    /// "anderson" (default) or "none" (plain local-global).
-    #[serde(default = "default_acceleration")]
-    pub acceleration: String,
+    /// Acceleration of the local-global iterations (default: anderson).
+    #[serde(default)]
+    pub acceleration: Acceleration,
     /// Anderson history length (default 5).
     #[serde(default = "default_history")]
     pub history: usize,
@@ -315,7 +363,7 @@ impl Default for SolverConfig {
             tolerance: default_tolerance(),
             record_tolerance: default_record_tolerance(),
             record_max_iterations: default_record_max_iterations(),
-            acceleration: default_acceleration(),
+            acceleration: Acceleration::default(),
             history: default_history(),
             parallel: true,
         }
@@ -349,9 +397,6 @@ fn unit_limits() -> [f64; 2] {
 fn default_attach_stiffness() -> f64 {
     1e4
 }
-fn default_profile() -> String {
-    "uniform".into()
-}
 fn default_max_iterations() -> usize {
     300
 }
@@ -363,9 +408,6 @@ fn default_record_max_iterations() -> usize {
 }
 fn default_record_tolerance() -> f64 {
     1e-11
-}
-fn default_acceleration() -> String {
-    "anderson".into()
 }
 fn default_history() -> usize {
     5

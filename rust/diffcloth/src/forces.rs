@@ -1,7 +1,7 @@
 //! Explicit external forces that enter the inertial prediction `y = x + h v + h^2 M^{-1} f`:
 //! gravity, wind, and per-node forces given to each step.
 
-use crate::config::WindConfig;
+use crate::config::{WindConfig, WindProfile};
 use crate::error::{Error, Result};
 use crate::Vec3;
 
@@ -17,9 +17,9 @@ pub struct Wind {
 
 impl Wind {
     pub fn new(cfg: &WindConfig, rest: &[Vec3], node_area: &[f64]) -> Result<Self> {
-        let mut coefficient = match cfg.profile.as_str() {
-            "uniform" => vec![1.0; rest.len()],
-            "inverse_distance" => {
+        let mut coefficient = match cfg.profile {
+            WindProfile::Uniform => vec![1.0; rest.len()],
+            WindProfile::InverseDistance => {
                 let centroid = rest.iter().sum::<Vec3>() / rest.len() as f64;
                 let scale = rest
                     .iter()
@@ -29,11 +29,6 @@ impl Wind {
                 rest.iter()
                     .map(|p| 1.0 / (p - centroid).norm().max(1e-2 * scale))
                     .collect()
-            }
-            other => {
-                return Err(Error::Config(format!(
-                    "wind.profile must be \"uniform\" or \"inverse_distance\", got {other:?}"
-                )))
             }
         };
         if cfg.per_area {

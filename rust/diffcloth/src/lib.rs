@@ -1,6 +1,8 @@
 //! diffcloth: a differentiable projective-dynamics cloth simulator (after DiffCloth, Li et al.
-//! 2022). Data flows one way: config -> scene (mesh, material, effects) -> [`Simulator`]
-//! forward steps. See `DESIGN.md` for the physics.
+//! 2022). Data flows one way: config -> [`Model`] (mesh, material, effects, the factored PD
+//! matrix; shared by `Arc`) -> [`Simulator`]s (each its own state and workspace) stepping
+//! forward, recording a tape, and running the adjoint backward. See `DESIGN.md` for the
+//! physics.
 
 pub mod anderson;
 pub mod backward;
@@ -24,11 +26,11 @@ pub mod tape;
 pub type Vec3 = nalgebra::Vector3<f64>;
 
 pub use backward::{AdjointSolver, BackwardOptions, Gradients};
-pub use config::{Effect, SceneConfig};
+pub use config::{Acceleration, BendModel, Effect, SceneConfig};
 pub use contact::{Branch, BranchCounts, Contact, ContactKind};
 pub use error::{Error, Result};
-pub use forward::{Simulator, StepInput, StepStats};
-pub use params::{Params, SolverSettings};
+pub use forward::{Model, Simulator, StepInput, StepStats};
+pub use params::{Param, ParamValue, Params, SolverSettings};
 pub use profile::Profile;
 
 /// Use one thread inside faer: its parallel sparse kernels are slower than sequential at cloth

@@ -5,8 +5,8 @@
 
 use crate::collision::{Motion, Obstacle, SelfCollision, Shape};
 use crate::config::{
-    AttachmentConfig, MaterialConfig, MeshConfig, ObstacleConfig, SceneConfig, SelfCollisionConfig,
-    ShapeConfig, SolverConfig,
+    Acceleration, AttachmentConfig, MaterialConfig, MeshConfig, ObstacleConfig, SceneConfig, SelfCollisionConfig,
+    Selection, ShapeConfig, SolverConfig,
 };
 use crate::contact::ContactSettings;
 use crate::effects::Effects;
@@ -76,16 +76,13 @@ pub fn attachment_nodes(cfg: &AttachmentConfig, placed: &PlacedMesh) -> Result<V
         }
         (None, true) => return Err(Error::Config("attachments: `nodes` or `select` is required".into())),
         (None, false) => cfg.nodes.clone(),
-        (Some(name), true) => match name.as_str() {
-            "top_corners" => top_corners(&placed.mesh),
-            "handles" if !placed.handles.is_empty() => placed.handles.clone(),
-            "handles" => return Err(Error::Config("attachments.select = \"handles\" needs a garment mesh".into())),
-            other => {
-                return Err(Error::Config(format!(
-                    "attachments.select: unknown selection {other:?} (known: \"top_corners\", \"handles\")"
-                )))
-            }
-        },
+        (Some(Selection::TopCorners), true) => top_corners(&placed.mesh),
+        (Some(Selection::Handles), true) if !placed.handles.is_empty() => placed.handles.clone(),
+        (Some(Selection::Handles), true) => {
+            return Err(Error::Config(
+                "attachments.select = \"handles\" needs a garment mesh".into(),
+            ))
+        }
     };
     if let Some(&bad) = nodes.iter().find(|&&i| i >= n) {
         return Err(Error::Config(format!(
@@ -285,15 +282,7 @@ pub(crate) fn solver_from_config(s: &SolverConfig) -> Result<SolverSettings> {
         tolerance: s.tolerance,
         record_tolerance: s.record_tolerance,
         record_max_iterations: s.record_max_iterations,
-        anderson: match s.acceleration.as_str() {
-            "anderson" => true,
-            "none" => false,
-            other => {
-                return Err(Error::Config(format!(
-                    "solver.acceleration must be \"anderson\" or \"none\", got {other:?}"
-                )))
-            }
-        },
+        anderson: s.acceleration == Acceleration::Anderson,
         history: s.history,
         parallel: s.parallel,
     };

@@ -5,6 +5,7 @@ use super::contact::{ContactCoupling, ContactLin};
 use super::{AdjointStepStats, BackwardProfile};
 use crate::energy::Stiffness;
 use crate::forward::Simulator;
+use crate::params::{Param, ParamValue};
 use crate::tape::StepRecord;
 use crate::Vec3;
 
@@ -33,6 +34,24 @@ pub struct Gradients {
     pub warnings: Vec<String>,
     /// Recorded steps whose forward residual was above [`TRUSTED_FORWARD_RESIDUAL`].
     pub loose_steps: Vec<(usize, f64)>,
+}
+
+impl Gradients {
+    /// The gradient with respect to a parameter, by the shared name table (None for `h`).
+    pub fn param(&self, p: Param) -> Option<ParamValue> {
+        use ParamValue::{Scalar, Vector};
+        Some(match p {
+            Param::H => return None,
+            Param::Density => Scalar(self.density),
+            Param::KStretch => Scalar(self.k_stretch),
+            Param::KBend => Scalar(self.k_bend),
+            Param::KAttach => Scalar(self.k_attach),
+            Param::Gravity => Vector(self.gravity),
+            Param::WindDirection => Vector(self.wind_direction),
+            Param::WindOmega => Scalar(self.wind_omega),
+            Param::WindPhi => Scalar(self.wind_phi),
+        })
+    }
 }
 
 impl Simulator {
