@@ -8,11 +8,10 @@
 //! (Meyer et al. 2003), which makes `A_i x` the mean-curvature normal `2 H n` on any valence.
 //! Boundary vertices carry no constraint: their Laplacian is not a curvature.
 
-use super::{PdConstraints, Projections, Stiffness, PARALLEL_MIN_CONSTRAINTS};
+use super::{project_vec3_each, PdConstraints, Projections, Stiffness};
 use crate::mesh::TriMesh;
 use crate::Vec3;
 use nalgebra::Matrix3;
-use rayon::prelude::*;
 use std::collections::BTreeMap;
 
 #[derive(Debug, Clone)]
@@ -187,26 +186,7 @@ impl PdConstraints for Bend {
     }
 
     fn project(&self, x: &[Vec3], parallel: bool, out: &mut Projections) -> f64 {
-        let work = |(i, (p, e)): (usize, (&mut [f64], &mut f64))| {
-            let (projection, energy) = self.project_one(i, x);
-            p.copy_from_slice(projection.as_slice());
-            *e = energy;
-        };
-        let Projections { values, energy } = out;
-        if parallel && energy.len() >= PARALLEL_MIN_CONSTRAINTS {
-            values
-                .par_chunks_mut(3)
-                .zip(energy.par_iter_mut())
-                .enumerate()
-                .for_each(work);
-        } else {
-            values
-                .chunks_mut(3)
-                .zip(energy.iter_mut())
-                .enumerate()
-                .for_each(work);
-        }
-        energy.iter().sum()
+        project_vec3_each(out, parallel, |i| self.project_one(i, x))
     }
 
     fn add_rhs(&self, projections: &Projections, rhs: &mut [Vec3]) {

@@ -23,11 +23,10 @@
 //! the PD weight `w = W^2 = 3 k_bend / (A0 + A1)` (Bergou's `Q = 3 / (A0 + A1) K^T K`).
 //! Boundary and non-manifold edges carry no constraint.
 
-use super::{PdConstraints, Projections, Stiffness, PARALLEL_MIN_CONSTRAINTS};
+use super::{project_vec3_each, PdConstraints, Projections, Stiffness};
 use crate::mesh::TriMesh;
 use crate::Vec3;
 use nalgebra::Matrix3;
-use rayon::prelude::*;
 use std::collections::BTreeMap;
 
 /// Rest stencil lengths at or below this (metres) count as flat, as in the reference.
@@ -186,27 +185,7 @@ impl PdConstraints for BendEdge {
     }
 
     fn project(&self, x: &[Vec3], parallel: bool, out: &mut Projections) -> f64 {
-        let work = |(i, (p, e)): (usize, (&mut [f64], &mut f64))| {
-            let (projection, energy) = self.project_one(i, x);
-            p.copy_from_slice(projection.as_slice());
-            *e = energy;
-        };
-        let Projections { values, energy } = out;
-        if parallel && energy.len() >= PARALLEL_MIN_CONSTRAINTS {
-            values
-                .par_chunks_mut(3)
-                .zip(energy.par_iter_mut())
-                .enumerate()
-                .for_each(work);
-        } else {
-            values
-                .chunks_mut(3)
-                .zip(energy.iter_mut())
-                .enumerate()
-                .for_each(work);
-        }
-        // A serial sum: the same bits whatever the thread count.
-        energy.iter().sum()
+        project_vec3_each(out, parallel, |i| self.project_one(i, x))
     }
 
     fn add_rhs(&self, projections: &Projections, rhs: &mut [Vec3]) {
@@ -461,7 +440,7 @@ mod tests {
         }
         let x = jitter(&m.positions, 0.01, 5);
         let b = BendEdge::new(&m, 1.0);
-        assert!(b.len() >= PARALLEL_MIN_CONSTRAINTS);
+        assert!(b.len() >= crate::energy::PARALLEL_MIN_CONSTRAINTS);
         let (mut serial, mut parallel) = (b.new_projections(), b.new_projections());
         let e = b.project(&x, false, &mut serial);
         assert_eq!(b.project(&x, true, &mut parallel).to_bits(), e.to_bits());

@@ -92,6 +92,37 @@ impl Projections {
     }
 }
 
+/// Projects a set whose constraints each give one 3-vector (`project_one(i) -> (p_i,
+/// energy_i)`) into `out`, on all threads for large sets; the energies are summed serially so
+/// the total has the same bits whatever the thread count. (Shared by the bending models.)
+pub(crate) fn project_vec3_each(
+    out: &mut Projections,
+    parallel: bool,
+    project_one: impl Fn(usize) -> (Vec3, f64) + Sync,
+) -> f64 {
+    let work = |(i, (p, e)): (usize, (&mut [f64], &mut f64))| {
+        let (projection, energy) = project_one(i);
+        p.copy_from_slice(projection.as_slice());
+        *e = energy;
+    };
+    let Projections { values, energy } = out;
+    if parallel && energy.len() >= PARALLEL_MIN_CONSTRAINTS {
+        use rayon::prelude::*;
+        values
+            .par_chunks_mut(3)
+            .zip(energy.par_iter_mut())
+            .enumerate()
+            .for_each(work);
+    } else {
+        values
+            .chunks_mut(3)
+            .zip(energy.iter_mut())
+            .enumerate()
+            .for_each(work);
+    }
+    energy.iter().sum()
+}
+
 /// Which physical parameter scales a constraint set's weights.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Stiffness {
