@@ -23,6 +23,7 @@ mod detection;
 mod diagnostics;
 mod model;
 mod pd;
+mod safeguards;
 mod state;
 mod step;
 

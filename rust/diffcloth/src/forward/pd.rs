@@ -1,6 +1,7 @@
 //! The PD solve of one step (paper Sec. 3.1): local step (projections), global step (the
 //! prefactored solve), and the safeguarded accelerated iteration between them.
 
+use super::safeguards::{Accepted, AndersonOutcome, Progress};
 use super::{Simulator, StepStats};
 use crate::profile::timed;
 use crate::Vec3;
@@ -95,7 +96,7 @@ impl Simulator {
     /// slow geometric rate of the unstable direction (Hat: hundreds of iterations with the
     /// update growing about 3 % per iteration while E falls). Two plain updates in a row that
     /// grow while E falls mark that regime; there the step `x + a (G(x) - x)` is tried with
-    /// `a` doubling up to [`ESCAPE_MAX_SCALE`] while E keeps falling. Every accepted point
+    /// `a` doubling up to `ESCAPE_MAX_SCALE` while E keeps falling. Every accepted point
     /// still lowers E, so the safeguard is the same; the first shrinking update ends it. Contact
     /// steps escape the same way (the Hat sliding off the head: 9 % -> 3 % of steps at the
     /// iteration cap); there E leaves out the contact forces, which only the fixed point
@@ -107,148 +108,58 @@ impl Simulator {
             t.clear();
         }
         // Recorded steps converge further: the adjoint needs the converged solution.
+        let recording = self.recording.is_some();
         let user_tol = self.solver.tolerance;
-        let tol = if self.recording.is_some() {
-            user_tol.min(self.solver.record_tolerance)
+        let (tol, max_it) = if recording {
+            (
+                user_tol.min(self.solver.record_tolerance),
+                self.solver.max_iterations.max(self.solver.record_max_iterations),
+            )
         } else {
-            user_tol
+            (user_tol, self.solver.max_iterations)
         };
-        let mut reached_user_tol: Option<usize> = None;
-        let max_it = if self.recording.is_some() {
-            self.solver
-                .max_iterations
-                .max(self.solver.record_max_iterations)
-        } else {
-            self.solver.max_iterations
-        };
-        let mut energy = self.local_step(Buffer::Iterate);
+        let energy = self.local_step(Buffer::Iterate);
         self.solve_contacts(Buffer::Iterate);
-        let mut residual = self.global_step();
-        let mut iterations = 1;
+        let residual = self.global_step();
         self.record(energy, residual);
-        // Saddle escape (see above): consecutive growing plain updates, and the step scale.
-        let mut growing = 0;
-        let mut escape_scale = 1.0;
-        // Residual guard (contact steps): the residual is not monotone under G, so accepted
-        // extrapolations and plain steps can cycle (measured on the Sock: a 14-iteration
-        // cycle, 3000 iterations without converging, where plain PD takes 101). Without a new
-        // lowest residual for `stall_window` iterations, the step finishes with plain PD.
-        let mut accelerate = self.solver.anderson;
-        let mut best_residual = residual;
-        let mut best_at = iterations;
-        let stall_window = 2 * self.work.anderson.history() + 4;
-        while residual > tol && iterations < max_it {
+        let history = self.work.anderson.history();
+        let mut p = Progress::new(energy, residual, user_tol, self.solver.anderson, history);
+        while p.residual > tol && p.iterations < max_it {
             // While no contact pushes (all take off at the iterate), E is the exact objective
             // and the energy guard applies; the residual guard only where contact forces act.
             let energy_guard = self.work.contacts.all_take_off();
-            let mut accepted = false;
-            let mut extrapolated_by_anderson = false;
-            let (previous_residual, previous_energy) = (residual, energy);
-            if escape_scale > 1.0 {
-                for ((e, x), u) in self
-                    .work
-                    .extrapolated
-                    .iter_mut()
-                    .zip(&self.work.iterate)
-                    .zip(&self.work.update)
-                {
-                    *e = x + escape_scale * u;
-                }
-                let trial = self.local_step(Buffer::Extrapolated);
-                if trial < energy {
-                    std::mem::swap(&mut self.work.iterate, &mut self.work.extrapolated);
-                    energy = trial;
-                    accepted = true;
-                    escape_scale = (2.0 * escape_scale).min(ESCAPE_MAX_SCALE);
-                    self.profile.escape_steps += 1;
-                } else {
-                    escape_scale = 1.0;
-                }
-            } else if accelerate {
-                self.work.anderson.push(&self.work.update, &self.work.mapped);
-                if self
-                    .work
-                    .anderson
-                    .extrapolate(&self.work.update, &self.work.mapped, &mut self.work.extrapolated)
-                {
-                    let trial = self.local_step(Buffer::Extrapolated);
-                    if energy_guard {
-                        if trial < energy {
-                            std::mem::swap(&mut self.work.iterate, &mut self.work.extrapolated);
-                            energy = trial;
-                            accepted = true;
-                            extrapolated_by_anderson = true;
-                        }
-                    } else {
-                        // Residual guard: evaluate G at the extrapolation, keep it if better.
-                        self.solve_contacts(Buffer::Extrapolated);
-                        std::mem::swap(&mut self.work.iterate, &mut self.work.extrapolated);
-                        std::mem::swap(&mut self.work.mapped, &mut self.work.previous_mapped);
-                        let trial_residual = self.global_step();
-                        iterations += 1;
-                        if trial_residual < residual {
-                            energy = trial;
-                            residual = trial_residual;
-                            self.record(energy, residual);
-                            if residual < best_residual {
-                                (best_residual, best_at) = (residual, iterations);
-                            }
-                            if reached_user_tol.is_none() && residual <= user_tol {
-                                reached_user_tol = Some(iterations);
-                            }
-                            continue;
-                        }
-                        // Undo: back to x_k and G(x_k).
-                        std::mem::swap(&mut self.work.iterate, &mut self.work.extrapolated);
-                        std::mem::swap(&mut self.work.mapped, &mut self.work.previous_mapped);
-                    }
-                    if !accepted {
-                        self.profile.acceleration_rejections += 1;
-                        self.work.anderson.reset();
-                    }
+            let previous = (p.residual, p.energy);
+            let mut accepted = None;
+            if p.escape_scale > 1.0 {
+                accepted = self.try_escape(&mut p).then_some(Accepted::Escape);
+            } else if p.accelerate {
+                match self.try_anderson(&mut p, energy_guard) {
+                    AndersonOutcome::Accepted => accepted = Some(Accepted::Anderson),
+                    // The extrapolation's G is already evaluated: that was the iteration.
+                    AndersonOutcome::AcceptedWithMap => continue,
+                    AndersonOutcome::Rejected | AndersonOutcome::Unavailable => {}
                 }
             }
-            if !accepted {
+            if accepted.is_none() {
                 self.work.iterate.copy_from_slice(&self.work.mapped);
-                energy = self.local_step(Buffer::Iterate);
+                p.energy = self.local_step(Buffer::Iterate);
             }
             self.solve_contacts(Buffer::Iterate);
-            residual = self.global_step();
-            iterations += 1;
-            self.record(energy, residual);
-            if reached_user_tol.is_none() && residual <= user_tol {
-                reached_user_tol = Some(iterations);
+            let residual = self.global_step();
+            p.iterated(residual);
+            self.record(p.energy, p.residual);
+            if !energy_guard {
+                self.watch_stall(&mut p);
             }
-            if !energy_guard && accelerate && escape_scale == 1.0 {
-                if residual < best_residual {
-                    (best_residual, best_at) = (residual, iterations);
-                } else if iterations - best_at > stall_window {
-                    accelerate = false;
-                    self.profile.acceleration_stalls += 1;
-                }
-            }
-            let grew = !extrapolated_by_anderson
-                && residual > previous_residual
-                && energy < previous_energy;
-            growing = if grew { growing + 1 } else { 0 };
-            if growing == 0 {
-                if escape_scale > 1.0 {
-                    // Out of the saddle: the stall test starts afresh.
-                    (best_residual, best_at) = (residual, iterations);
-                }
-                escape_scale = 1.0;
-            } else if growing >= 2 && escape_scale == 1.0 {
-                escape_scale = 2.0;
-                self.work.anderson.reset();
-            }
+            self.watch_saddle(&mut p, previous, accepted == Some(Accepted::Anderson));
         }
-        if let Some(at) = reached_user_tol {
-            self.profile.polish_iterations += (iterations - at) as u64;
+        if let Some(at) = p.reached_user_tol {
+            self.profile.polish_iterations += (p.iterations - at) as u64;
         }
         StepStats {
-            iterations,
-            residual,
-            converged: residual <= tol,
+            iterations: p.iterations,
+            residual: p.residual,
+            converged: p.residual <= tol,
             contacts: self.work.contacts.counts(),
         }
     }
@@ -280,5 +191,3 @@ pub(super) enum Buffer {
     Extrapolated,
 }
 
-/// Largest step scale `a` of the saddle escape in [`Simulator::solve_pd`].
-const ESCAPE_MAX_SCALE: f64 = 64.0;
