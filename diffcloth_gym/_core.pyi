@@ -102,11 +102,11 @@ class Simulator:
         self,
         dl_dx: npt.NDArray[np.float64] | None = None,
         dl_dv: npt.NDArray[np.float64] | None = None,
-        solver: str = "krylov",
-        tolerance: float = 1e-10,
-        max_iterations: int = 500,
+        solver: str | None = None,
+        tolerance: float | None = None,
+        max_iterations: int | None = None,
     ) -> dict[str, Any]:
-        """Backpropagates (N, n, 3) dL/dx and dL/dv of the recorded steps; returns the gradients."""
+        """Backpropagates (N, n, 3) dL/dx and dL/dv of the recorded steps; returns the gradients (None: the core's defaults: krylov, 1e-10, 500)."""
     def set_trace(self, on: bool) -> None:
         """Records (on) or stops recording (off) the PD convergence trace of each step."""
     def trace(self) -> npt.NDArray[np.float64]:

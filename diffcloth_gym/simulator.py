@@ -182,8 +182,8 @@ class Simulator:
         """``(recorded steps, bytes held by the tape)``."""
         return self._core.tape_info()
 
-    def backward(self, dl_dx: Any = None, dl_dv: Any = None, solver: str = "krylov",
-                 tolerance: float = 1e-10, max_iterations: int = 500) -> dict:
+    def backward(self, dl_dx: Any = None, dl_dv: Any = None, solver: str | None = None,
+                 tolerance: float | None = None, max_iterations: int | None = None) -> dict:
         """Adjoint gradients of a loss through the recorded steps.
 
         ``dl_dx`` and ``dl_dv``: (N, n, 3) gradients of the loss with respect to the positions
@@ -212,7 +212,9 @@ class Simulator:
             if arr.shape != (steps, self.num_nodes, 3):
                 raise InputError(f"{name} must have shape ({steps}, {self.num_nodes}, 3), got {arr.shape}")
             return arr
-        out = self._core.backward(grads("dl_dx", dl_dx), grads("dl_dv", dl_dv), solver, float(tolerance), int(max_iterations))
+        out = self._core.backward(grads("dl_dx", dl_dx), grads("dl_dv", dl_dv), solver,
+                                  None if tolerance is None else float(tolerance),
+                                  None if max_iterations is None else int(max_iterations))
         out["attachment_targets"] = [np.asarray(a) for a in out["attachment_targets"]]
         out["external_forces"] = [np.asarray(a) for a in out["external_forces"]]
         # A force held constant over the rollout: the sum of the per-step gradients.

@@ -241,3 +241,16 @@ def test_a_step_stopped_at_the_cap_warns_unless_the_count_is_fixed():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         sim.step()
+
+
+def test_one_table_of_parameter_names(small):
+    """params(), set_params, the gradients and torch's PARAM_NAMES share the core's table."""
+    from diffcloth_gym import _core
+
+    names = set(small.params())
+    assert names == set(_core.PARAM_NAMES) | {"h"}
+    small.set_params(**small.params())  # every name is settable
+    small.set_recording(True)
+    small.step()
+    g = small.backward(dl_dx=np.ones((1, small.num_nodes, 3)))
+    assert set(_core.PARAM_NAMES) <= set(g)

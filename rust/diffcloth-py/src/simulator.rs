@@ -292,22 +292,25 @@ impl PySimulator {
     }
 
     /// Backpropagates dL/dx and dL/dv of every recorded step's output (arrays (N, n, 3) or
-    /// None) and returns the gradients as a dict.
-    #[pyo3(signature = (dl_dx=None, dl_dv=None, solver="krylov", tolerance=1e-10, max_iterations=500))]
+    /// None) and returns the gradients as a dict. Options left None take the core's defaults
+    /// (`BackwardOptions::default()`, their one home).
+    #[pyo3(signature = (dl_dx=None, dl_dv=None, solver=None, tolerance=None, max_iterations=None))]
     fn backward<'py>(
         &mut self,
         py: Python<'py>,
         dl_dx: Option<PyReadonlyArray3<'_, f64>>,
         dl_dv: Option<PyReadonlyArray3<'_, f64>>,
-        solver: &str,
-        tolerance: f64,
-        max_iterations: usize,
+        solver: Option<&str>,
+        tolerance: Option<f64>,
+        max_iterations: Option<usize>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let defaults = BackwardOptions::default();
         let solver = match solver {
-            "direct" => AdjointSolver::Direct,
-            "krylov" => AdjointSolver::Krylov,
-            "fixed_point" => AdjointSolver::FixedPoint,
-            other => {
+            None => defaults.solver,
+            Some("direct") => AdjointSolver::Direct,
+            Some("krylov") => AdjointSolver::Krylov,
+            Some("fixed_point") => AdjointSolver::FixedPoint,
+            Some(other) => {
                 return Err(ParameterError::new_err(format!(
                     "solver must be \"direct\", \"krylov\" or \"fixed_point\", got {other:?}"
                 )))
@@ -317,8 +320,8 @@ impl PySimulator {
         let sim = &mut self.inner;
         let options = BackwardOptions {
             solver,
-            tolerance,
-            max_iterations,
+            tolerance: tolerance.unwrap_or(defaults.tolerance),
+            max_iterations: max_iterations.unwrap_or(defaults.max_iterations),
         };
         let g = guarded(py, || sim.backward(&gx, &gv, &options))?;
         gradients_dict(py, &g)
