@@ -2,7 +2,9 @@
 //! Python is a fresh copy: callers may keep or mutate it without touching the simulator.
 
 use crate::errors::InputError;
-use diffcloth::{Branch, Contact, ContactKind, Gradients, Param, ParamValue, Profile, StepStats, Vec3};
+use diffcloth::{
+    Branch, Contact, ContactKind, Gradients, Param, ParamValue, Profile, StepStats, Vec3,
+};
 use numpy::ndarray::Array2;
 use numpy::{Element, PyArray2, PyReadonlyArray2, PyReadonlyArray3, ToPyArray};
 use pyo3::prelude::*;
@@ -178,7 +180,11 @@ pub(crate) fn gradients_dict<'py>(py: Python<'py>, g: &Gradients) -> PyResult<Bo
 }
 
 /// `d[name] = value`: a float, or a list of 3 for vector parameters.
-pub(crate) fn set_param_item(d: &Bound<'_, PyDict>, name: Param, value: ParamValue) -> PyResult<()> {
+pub(crate) fn set_param_item(
+    d: &Bound<'_, PyDict>,
+    name: Param,
+    value: ParamValue,
+) -> PyResult<()> {
     match value {
         ParamValue::Scalar(x) => d.set_item(name.name(), x),
         ParamValue::Vector(v) => d.set_item(name.name(), v.as_slice().to_vec()),

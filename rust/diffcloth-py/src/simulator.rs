@@ -7,8 +7,8 @@ use crate::conv::{
 };
 use crate::errors::{guarded, InputError, ParameterError};
 use diffcloth::{
-    Acceleration, AdjointSolver, BackwardOptions, Param, ParamValue, Params, SceneConfig, Simulator, SolverSettings, StepInput,
-    StepStats, Vec3,
+    Acceleration, AdjointSolver, BackwardOptions, Param, ParamValue, Params, SceneConfig,
+    Simulator, SolverSettings, StepInput, StepStats, Vec3,
 };
 use numpy::{PyArray2, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
@@ -153,17 +153,19 @@ impl PySimulator {
                         Param::names()
                     ))
                 })?;
-                let value = if name.is_vector() {
-                    let a: [f64; 3] = value
-                        .extract()
-                        .map_err(|_| ParameterError::new_err(format!("{key} must be 3 numbers")))?;
-                    ParamValue::Vector(Vec3::from(a))
-                } else {
-                    ParamValue::Scalar(value.extract().map_err(|_| {
-                        ParameterError::new_err(format!("{key} must be a number"))
-                    })?)
-                };
-                p.set(name, value).map_err(|e| ParameterError::new_err(e.to_string()))?;
+                let value =
+                    if name.is_vector() {
+                        let a: [f64; 3] = value.extract().map_err(|_| {
+                            ParameterError::new_err(format!("{key} must be 3 numbers"))
+                        })?;
+                        ParamValue::Vector(Vec3::from(a))
+                    } else {
+                        ParamValue::Scalar(value.extract().map_err(|_| {
+                            ParameterError::new_err(format!("{key} must be a number"))
+                        })?)
+                    };
+                p.set(name, value)
+                    .map_err(|e| ParameterError::new_err(e.to_string()))?;
             }
         }
         let sim = &mut self.inner;
@@ -175,8 +177,7 @@ impl PySimulator {
         let d = PyDict::new(py);
         d.set_item("max_iterations", s.max_iterations)?;
         d.set_item("tolerance", s.tolerance)?;
-        let acceleration = if s.anderson { Acceleration::Anderson } else { Acceleration::None };
-        d.set_item("acceleration", acceleration.name())?;
+        d.set_item("acceleration", s.acceleration.name())?;
         d.set_item("history", s.history)?;
         d.set_item("parallel", s.parallel)?;
         d.set_item("record_tolerance", s.record_tolerance)?;
@@ -202,7 +203,7 @@ impl PySimulator {
                     "acceleration" => {
                         let a: String = value.extract().map_err(|_| bad("\"anderson\" or \"none\""))?;
                         let a = Acceleration::from_name(&a).ok_or_else(|| bad("\"anderson\" or \"none\""))?;
-                        s.anderson = a == Acceleration::Anderson;
+                        s.acceleration = a;
                     }
                     other => {
                         return Err(ParameterError::new_err(format!(

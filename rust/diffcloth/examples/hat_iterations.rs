@@ -11,7 +11,7 @@ fn main() {
     sim.set_solver(SolverSettings {
         tolerance: 0.0,
         max_iterations: 200,
-        anderson: false,
+        acceleration: diffcloth::Acceleration::None,
         parallel: std::env::var("PAR").is_ok(),
         ..s
     })

@@ -4,6 +4,7 @@
 
 use crate::error::{Error, Result};
 use crate::mesh::GridPlane;
+use crate::params::SolverSettings;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -38,7 +39,7 @@ pub struct SceneConfig {
     pub obstacles: Vec<ObstacleConfig>,
     pub self_collision: Option<SelfCollisionConfig>,
     #[serde(default)]
-    pub solver: SolverConfig,
+    pub solver: SolverSettings,
 }
 
 /// A physical effect a scene can switch on.
@@ -295,81 +296,6 @@ pub struct SelfCollisionConfig {
     pub mu: f64,
 }
 
-/// `solver.acceleration`.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Acceleration {
-    /// Energy-guarded Anderson acceleration (default).
-    #[default]
-    Anderson,
-    /// Plain local-global iterations.
-    None,
-}
-
-impl Acceleration {
-    /// The name used in configs and by the Python binding.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Anderson => "anderson",
-            Self::None => "none",
-        }
-    }
-
-    pub fn from_name(name: &str) -> Option<Self> {
-        [Self::Anderson, Self::None]
-            .into_iter()
-            .find(|a| a.name() == name)
-    }
-}
-
-/// PD solver settings: the accuracy knobs.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SolverConfig {
-    /// Iteration cap per step (default 300).
-    #[serde(default = "default_max_iterations")]
-    pub max_iterations: usize,
-    /// Stop when the RMS per-coordinate PD update `|G(x) - x|` falls below this, in metres
-    /// (default 1e-8). `G(x) - x = -P^{-1} grad E(x)`: a preconditioned gradient norm.
-    #[serde(default = "default_tolerance")]
-    pub tolerance: f64,
-    /// Tolerance for steps recorded on a tape (default 1e-11): the adjoint linearizes each step
-    /// at its end state, which must be the converged implicit-Euler solution (at 1e-8 the Hat's
-    /// 400-step target gradients were 29 % off; at 1e-10, 0.04 %; Wind 24x24, which has no
-    /// bending and amplifies per-step differences, 0.9 % at 1e-10 and 0.3 % at 1e-11, for
-    /// about 10 % more time). Steps converge to
-    /// `min(tolerance, record_tolerance)` while recording; the extra iterations are counted as
-    /// polish in the profile.
-    #[serde(default = "default_record_tolerance")]
-    pub record_tolerance: f64,
-    /// Iteration cap of recorded steps (default 2000; the larger of this and max_iterations).
-    #[serde(default = "default_record_max_iterations")]
-    pub record_max_iterations: usize,
-    /// Acceleration of the local-global iterations (default: anderson).
-    #[serde(default)]
-    pub acceleration: Acceleration,
-    /// Anderson history length (default 5).
-    #[serde(default = "default_history")]
-    pub history: usize,
-    /// Parallel local step for large meshes (default true).
-    #[serde(default = "yes")]
-    pub parallel: bool,
-}
-
-impl Default for SolverConfig {
-    fn default() -> Self {
-        Self {
-            max_iterations: default_max_iterations(),
-            tolerance: default_tolerance(),
-            record_tolerance: default_record_tolerance(),
-            record_max_iterations: default_record_max_iterations(),
-            acceleration: Acceleration::default(),
-            history: default_history(),
-            parallel: true,
-        }
-    }
-}
-
 fn default_thickness() -> f64 {
     0.01
 }
@@ -396,21 +322,6 @@ fn unit_limits() -> [f64; 2] {
 }
 fn default_attach_stiffness() -> f64 {
     1e4
-}
-fn default_max_iterations() -> usize {
-    300
-}
-fn default_tolerance() -> f64 {
-    1e-8
-}
-fn default_record_max_iterations() -> usize {
-    2000
-}
-fn default_record_tolerance() -> f64 {
-    1e-11
-}
-fn default_history() -> usize {
-    5
 }
 
 impl SceneConfig {

@@ -2,21 +2,20 @@
 //! gravity, wind, and per-node forces given to each step.
 
 use crate::config::{WindConfig, WindProfile};
-use crate::error::{Error, Result};
+use crate::params::Params;
 use crate::Vec3;
 
-/// Wind after the paper's Appendix B: `f_a(t) = 0.5 (sin(omega t + phi) + 1) k_a d`.
+/// Wind after the paper's Appendix B: `f_a(t) = 0.5 (sin(omega t + phi) + 1) k_a d`. The
+/// amplitude d, omega and phi are parameters (`Params::wind_*`, their one home); the wind
+/// itself keeps only the per-node factor fixed by the rest shape.
 #[derive(Debug, Clone)]
 pub struct Wind {
-    pub direction: Vec3,
-    pub omega: f64,
-    pub phi: f64,
     /// Per-node coefficient `k_a` (times the node's area when the amplitude is per area).
     coefficient: Vec<f64>,
 }
 
 impl Wind {
-    pub fn new(cfg: &WindConfig, rest: &[Vec3], node_area: &[f64]) -> Result<Self> {
+    pub fn new(cfg: &WindConfig, rest: &[Vec3], node_area: &[f64]) -> Self {
         let mut coefficient = match cfg.profile {
             WindProfile::Uniform => vec![1.0; rest.len()],
             WindProfile::InverseDistance => {
@@ -37,26 +36,7 @@ impl Wind {
                 .zip(node_area)
                 .for_each(|(k, a)| *k *= a);
         }
-        let wind = Self {
-            direction: Vec3::from(cfg.direction),
-            omega: cfg.omega,
-            phi: cfg.phi,
-            coefficient,
-        };
-        wind.validate()?;
-        Ok(wind)
-    }
-
-    pub fn validate(&self) -> Result<()> {
-        if !(self.direction.iter().all(|c| c.is_finite())
-            && self.omega.is_finite()
-            && self.phi.is_finite())
-        {
-            return Err(Error::Param(
-                "wind direction, omega and phi must be finite".into(),
-            ));
-        }
-        Ok(())
+        Self { coefficient }
     }
 
     /// Per-node coefficient `k_a` (including the node area when per area).
@@ -65,13 +45,13 @@ impl Wind {
     }
 
     /// Temporal factor `0.5 (sin(omega t + phi) + 1)`.
-    pub fn modulation(&self, t: f64) -> f64 {
-        0.5 * ((self.omega * t + self.phi).sin() + 1.0)
+    pub fn modulation(p: &Params, t: f64) -> f64 {
+        0.5 * ((p.wind_omega * t + p.wind_phi).sin() + 1.0)
     }
 
     /// Adds the wind force at time `t` to `f`.
-    pub fn add_forces(&self, t: f64, f: &mut [Vec3]) {
-        let d = self.modulation(t) * self.direction;
+    pub fn add_forces(&self, p: &Params, t: f64, f: &mut [Vec3]) {
+        let d = Self::modulation(p, t) * p.wind_direction;
         for (fa, k) in f.iter_mut().zip(&self.coefficient) {
             *fa += *k * d;
         }

@@ -26,11 +26,11 @@ pub mod tape;
 pub type Vec3 = nalgebra::Vector3<f64>;
 
 pub use backward::{AdjointSolver, BackwardOptions, Gradients};
-pub use config::{Acceleration, BendModel, Effect, SceneConfig};
+pub use config::{BendModel, Effect, SceneConfig};
 pub use contact::{Branch, BranchCounts, Contact, ContactKind};
 pub use error::{Error, Result};
 pub use forward::{Model, Simulator, StepInput, StepStats};
-pub use params::{Param, ParamValue, Params, SolverSettings};
+pub use params::{Acceleration, Param, ParamValue, Params, SolverSettings};
 pub use profile::Profile;
 
 /// Use one thread inside faer: its parallel sparse kernels are slower than sequential at cloth

@@ -5,8 +5,8 @@
 
 use crate::collision::{Motion, Obstacle, SelfCollision, Shape};
 use crate::config::{
-    Acceleration, AttachmentConfig, MaterialConfig, MeshConfig, ObstacleConfig, SceneConfig, SelfCollisionConfig,
-    Selection, ShapeConfig, SolverConfig,
+    AttachmentConfig, MaterialConfig, MeshConfig, ObstacleConfig, SceneConfig, Selection,
+    SelfCollisionConfig, ShapeConfig,
 };
 use crate::contact::ContactSettings;
 use crate::effects::Effects;
@@ -72,9 +72,15 @@ pub fn attachment_nodes(cfg: &AttachmentConfig, placed: &PlacedMesh) -> Result<V
     let n = placed.mesh.num_vertices();
     let nodes = match (&cfg.select, cfg.nodes.is_empty()) {
         (Some(_), false) => {
-            return Err(Error::Config("attachments: give either `nodes` or `select`, not both".into()))
+            return Err(Error::Config(
+                "attachments: give either `nodes` or `select`, not both".into(),
+            ))
         }
-        (None, true) => return Err(Error::Config("attachments: `nodes` or `select` is required".into())),
+        (None, true) => {
+            return Err(Error::Config(
+                "attachments: `nodes` or `select` is required".into(),
+            ))
+        }
         (None, false) => cfg.nodes.clone(),
         (Some(Selection::TopCorners), true) => top_corners(&placed.mesh),
         (Some(Selection::Handles), true) if !placed.handles.is_empty() => placed.handles.clone(),
@@ -276,16 +282,7 @@ pub(crate) fn strain_limits(m: &MaterialConfig) -> Result<[f64; 2]> {
 }
 
 /// The scene's solver settings, validated.
-pub(crate) fn solver_from_config(s: &SolverConfig) -> Result<SolverSettings> {
-    let solver = SolverSettings {
-        max_iterations: s.max_iterations,
-        tolerance: s.tolerance,
-        record_tolerance: s.record_tolerance,
-        record_max_iterations: s.record_max_iterations,
-        anderson: s.acceleration == Acceleration::Anderson,
-        history: s.history,
-        parallel: s.parallel,
-    };
-    validate_solver(&solver)?;
-    Ok(solver)
+pub(crate) fn solver_from_config(s: &SolverSettings) -> Result<SolverSettings> {
+    validate_solver(s)?;
+    Ok(s.clone())
 }

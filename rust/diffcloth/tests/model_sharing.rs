@@ -93,7 +93,9 @@ fn a_checkpointed_backward_leaves_the_caller_unchanged() {
     let before = fingerprint(&sim);
     let n = sim.num_nodes();
     let dl_dx: Vec<Vec<Vec3>> = (0..10).map(|k| random_vectors(n, 1.0, k)).collect();
-    let g = sim.backward(&dl_dx, &[], &BackwardOptions::default()).unwrap();
+    let g = sim
+        .backward(&dl_dx, &[], &BackwardOptions::default())
+        .unwrap();
     assert!(g.v0.iter().any(|v| v.norm() > 0.0));
     assert_eq!(fingerprint(&sim), before);
     // A rejected call does no work either (wrong number of rows).
@@ -150,5 +152,8 @@ fn a_diverged_step_rolls_back_its_targets() {
     assert!(matches!(err, Err(diffcloth::Error::Diverged(_))), "{err:?}");
     assert_eq!(sim.attachment_targets(), &before[..]);
     sim.step(StepInput::default()).unwrap();
-    assert!(sim.positions().iter().all(|p| p.iter().all(|c| c.is_finite())));
+    assert!(sim
+        .positions()
+        .iter()
+        .all(|p| p.iter().all(|c| c.is_finite())));
 }

@@ -4,6 +4,7 @@
 use super::contact::{ContactCoupling, ContactLin};
 use super::{AdjointStepStats, BackwardProfile};
 use crate::energy::Stiffness;
+use crate::forces::Wind;
 use crate::forward::Simulator;
 use crate::params::{Param, ParamValue};
 use crate::tape::StepRecord;
@@ -136,16 +137,16 @@ impl Simulator {
             grads.density += -z[i].dot(&dg) + zeta[i].dot(&dd);
         }
         if let Some(wind) = self.wind() {
-            let s = wind.modulation(rec.time);
-            let ds = 0.5 * (wind.omega * rec.time + wind.phi).cos();
+            let s = Wind::modulation(p, rec.time);
+            let ds = 0.5 * (p.wind_omega * rec.time + p.wind_phi).cos();
             let kz: Vec3 = zf
                 .iter()
                 .zip(wind.coefficient())
                 .map(|(zi, c)| *c * zi)
                 .sum();
             grads.wind_direction += s * kz;
-            grads.wind_omega += ds * rec.time * kz.dot(&wind.direction);
-            grads.wind_phi += ds * kz.dot(&wind.direction);
+            grads.wind_omega += ds * rec.time * kz.dot(&p.wind_direction);
+            grads.wind_phi += ds * kz.dot(&p.wind_direction);
         }
         (zeta, frame_x)
     }

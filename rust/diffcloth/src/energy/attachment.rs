@@ -82,7 +82,10 @@ mod tests {
                 let mut xm = x.clone();
                 xm[i][d] -= eps;
                 let fd = (a.energy(&xp, &targets) - a.energy(&xm, &targets)) / (2.0 * eps);
-                assert!((fd - (g[i][d] - rhs[i][d])).abs() < 1e-6, "node {i} dim {d}");
+                assert!(
+                    (fd - (g[i][d] - rhs[i][d])).abs() < 1e-6,
+                    "node {i} dim {d}"
+                );
             }
         }
         // The projection is the target: zero energy there.

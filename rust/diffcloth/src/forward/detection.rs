@@ -15,7 +15,8 @@ impl Simulator {
         let mut velocity = std::mem::take(&mut self.work.detect_velocity);
         velocity.clear();
         velocity.extend(
-            self.state.v
+            self.state
+                .v
                 .iter()
                 .zip(&self.state.x)
                 .zip(&self.work.mapped)
@@ -42,7 +43,9 @@ impl Simulator {
         self.profile.detection += detect_start.elapsed();
         if self.delassus_response() {
             let start = Instant::now();
-            self.work.delassus.build(&self.model.factor, &self.work.contacts.contacts);
+            self.work
+                .delassus
+                .build(&self.model.factor, &self.work.contacts.contacts);
             self.profile.contact_solve += start.elapsed();
             self.profile.delassus_builds += 1;
         }
@@ -50,7 +53,8 @@ impl Simulator {
 
     /// Whether this step's contacts respond through the Delassus operator.
     pub(super) fn delassus_response(&self) -> bool {
-        !self.work.contacts.is_empty() && self.model.contact_settings.response == ContactResponse::Delassus
+        !self.work.contacts.is_empty()
+            && self.model.contact_settings.response == ContactResponse::Delassus
     }
 
     /// Whether the solved step (`mapped`) put a node that has no contact with an obstacle

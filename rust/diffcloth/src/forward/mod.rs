@@ -113,7 +113,10 @@ impl Workspace {
             update: zeros.clone(),
             extrapolated: zeros.clone(),
             anderson: Anderson::new(history, n),
-            projections: model.constraint_sets().map(|c| c.new_projections()).collect(),
+            projections: model
+                .constraint_sets()
+                .map(|c| c.new_projections())
+                .collect(),
             solve_rows: zeros,
             previous_targets: Vec::new(),
         }

@@ -84,7 +84,7 @@ impl Model {
             _ => None,
         };
         let wind = match (&config.wind, effects.wind) {
-            (Some(w), true) => Some(Wind::new(w, &mesh.positions, &node_area)?),
+            (Some(w), true) => Some(Wind::new(w, &mesh.positions, &node_area)),
             _ => None,
         };
         let obstacles = if effects.obstacle_contact {
@@ -162,11 +162,6 @@ impl Model {
                 self.apply_matrix_params();
                 return Err(e);
             }
-        }
-        if let Some(w) = self.wind.as_mut() {
-            w.direction = params.wind_direction;
-            w.omega = params.wind_omega;
-            w.phi = params.wind_phi;
         }
         Ok(refactor)
     }

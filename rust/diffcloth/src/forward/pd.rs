@@ -3,6 +3,7 @@
 
 use super::safeguards::{Accepted, AndersonOutcome, Progress};
 use super::{Simulator, StepStats};
+use crate::params::Acceleration;
 use crate::profile::timed;
 use crate::Vec3;
 use std::time::Instant;
@@ -113,7 +114,9 @@ impl Simulator {
         let (tol, max_it) = if recording {
             (
                 user_tol.min(self.solver.record_tolerance),
-                self.solver.max_iterations.max(self.solver.record_max_iterations),
+                self.solver
+                    .max_iterations
+                    .max(self.solver.record_max_iterations),
             )
         } else {
             (user_tol, self.solver.max_iterations)
@@ -123,7 +126,8 @@ impl Simulator {
         let residual = self.global_step();
         self.record(energy, residual);
         let history = self.work.anderson.history();
-        let mut p = Progress::new(energy, residual, user_tol, self.solver.anderson, history);
+        let accelerate = self.solver.acceleration == Acceleration::Anderson;
+        let mut p = Progress::new(energy, residual, user_tol, accelerate, history);
         while p.residual > tol && p.iterations < max_it {
             // While no contact pushes (all take off at the iterate), E is the exact objective
             // and the energy guard applies; the residual guard only where contact forces act.
@@ -190,4 +194,3 @@ pub(super) enum Buffer {
     Iterate,
     Extrapolated,
 }
-

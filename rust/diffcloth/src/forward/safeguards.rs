@@ -106,7 +106,10 @@ impl Simulator {
     pub(super) fn try_anderson(&mut self, p: &mut Progress, energy_guard: bool) -> AndersonOutcome {
         let w = &mut self.work;
         w.anderson.push(&w.update, &w.mapped);
-        if !w.anderson.extrapolate(&w.update, &w.mapped, &mut w.extrapolated) {
+        if !w
+            .anderson
+            .extrapolate(&w.update, &w.mapped, &mut w.extrapolated)
+        {
             return AndersonOutcome::Unavailable;
         }
         let trial = self.local_step(Buffer::Extrapolated);

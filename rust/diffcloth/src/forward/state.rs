@@ -22,7 +22,9 @@ impl Simulator {
         if let Some(v) = v {
             check_nodes("v", v, n)?;
         }
-        self.state.x.copy_from_slice(x.unwrap_or(&self.model.mesh.positions));
+        self.state
+            .x
+            .copy_from_slice(x.unwrap_or(&self.model.mesh.positions));
         match v {
             Some(v) => self.state.v.copy_from_slice(v),
             None => self.state.v.iter_mut().for_each(|vi| *vi = Vec3::zeros()),

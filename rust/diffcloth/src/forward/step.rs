@@ -5,8 +5,8 @@ use super::{Simulator, StepInput, StepStats};
 use crate::error::{Error, Result};
 use crate::params::check_nodes;
 use crate::tape::{CompletedStep, Tape};
-use std::sync::Arc;
 use crate::Vec3;
+use std::sync::Arc;
 use std::time::Instant;
 
 impl Simulator {
@@ -30,7 +30,12 @@ impl Simulator {
         }
         // The PD result is in `mapped`.
         let h = self.model.params.h;
-        if !self.work.mapped.iter().all(|p| p.iter().all(|c| c.is_finite())) {
+        if !self
+            .work
+            .mapped
+            .iter()
+            .all(|p| p.iter().all(|c| c.is_finite()))
+        {
             // Roll back everything the call set: the targets too, or the next plain step
             // would diverge again.
             std::mem::swap(&mut self.state.targets, &mut self.work.previous_targets);
@@ -41,7 +46,12 @@ impl Simulator {
         }
         self.record_step(&input, &stats);
         let state = &mut self.state;
-        for ((x, v), xn) in state.x.iter_mut().zip(state.v.iter_mut()).zip(&self.work.mapped) {
+        for ((x, v), xn) in state
+            .x
+            .iter_mut()
+            .zip(state.v.iter_mut())
+            .zip(&self.work.mapped)
+        {
             *v = (xn - *x) / h;
             *x = *xn;
         }
@@ -107,7 +117,7 @@ impl Simulator {
                 .for_each(|(fi, m)| *fi += *m * g);
         }
         if let Some(w) = &self.model.wind {
-            w.add_forces(self.state.time, f);
+            w.add_forces(&self.model.params, self.state.time, f);
         }
         let inv_h2 = 1.0 / (h * h);
         for i in 0..n {
@@ -131,7 +141,8 @@ impl Simulator {
             rec.solver = self.solver.clone();
             rec.changed_at = None;
         } else if rec.changed_at.is_none()
-            && (!Arc::ptr_eq(&rec.model, &self.model) || (checkpointed && rec.solver != self.solver))
+            && (!Arc::ptr_eq(&rec.model, &self.model)
+                || (checkpointed && rec.solver != self.solver))
         {
             rec.changed_at = Some(rec.tape.len());
         }
@@ -139,7 +150,11 @@ impl Simulator {
             x_prev: &self.state.x,
             v_prev: &self.state.v,
             x_next: &self.work.mapped,
-            targets: self.model.attachments.is_some().then_some(&self.state.targets[..]),
+            targets: self
+                .model
+                .attachments
+                .is_some()
+                .then_some(&self.state.targets[..]),
             forces: input.external_forces,
             time: self.state.time,
             contacts: &self.work.contacts.contacts,
