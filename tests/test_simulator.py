@@ -254,3 +254,21 @@ def test_one_table_of_parameter_names(small):
     small.step()
     g = small.backward(dl_dx=np.ones((1, small.num_nodes, 3)))
     assert set(_core.PARAM_NAMES) <= set(g)
+
+
+def test_sizes_that_would_exhaust_memory_are_refused(small):
+    """Issue 11 item 2: a number that sizes an allocation is bounded, with an error naming it,
+    and the simulator stays usable (these aborted the interpreter before)."""
+    before = small.positions.copy()
+    with pytest.raises(diffcloth_gym.ParameterError, match="max_iterations must be at most"):
+        small.set_solver(max_iterations=2**40)
+    small.set_trace(True)
+    small.step()
+    assert np.all(np.isfinite(small.positions)) and not np.array_equal(small.positions, before)
+    huge = {**SMALL_GRID, "mesh": {**SMALL_GRID["mesh"], "rows": 100_000, "cols": 100_000}}
+    with pytest.raises(diffcloth_gym.MeshError, match="larger than"):
+        Simulator.from_config(huge)
+    for path in ("/dev/zero", "/dev/urandom"):
+        obj = {**SMALL_GRID, "mesh": {"kind": "obj", "path": path}}
+        with pytest.raises(diffcloth_gym.ConfigError, match="not a regular file"):
+            Simulator.from_config(obj)

@@ -168,12 +168,16 @@ impl Acceleration {
     }
 }
 
+/// Largest iteration cap a step may have: caps size the per-iteration trace, and a step
+/// that needs more iterations than this is not going to converge anyway.
+pub const MAX_ITERATIONS: usize = 1_000_000;
+
 /// The accuracy knobs of the PD solve (`[solver]` in a scene config, `set_solver` at run
 /// time): their one home, with their defaults.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SolverSettings {
-    /// Iteration cap per step (default 300).
+    /// Iteration cap per step (default 300; at most [`MAX_ITERATIONS`]).
     #[serde(default = "default_max_iterations")]
     pub max_iterations: usize,
     /// Stop when the RMS per-coordinate PD update `|G(x) - x|` falls below this, in metres
@@ -189,7 +193,8 @@ pub struct SolverSettings {
     /// polish in the profile.
     #[serde(default = "default_record_tolerance")]
     pub record_tolerance: f64,
-    /// Iteration cap of recorded steps (default 2000; the larger of this and max_iterations).
+    /// Iteration cap of recorded steps (default 2000; the larger of this and max_iterations;
+    /// at most [`MAX_ITERATIONS`]).
     #[serde(default = "default_record_max_iterations")]
     pub record_max_iterations: usize,
     /// Acceleration of the local-global iterations (default: anderson).
@@ -234,6 +239,14 @@ fn default_history() -> usize {
 }
 fn yes() -> bool {
     true
+}
+
+impl SolverSettings {
+    /// Iterations a step can take (recorded steps may take more), plus the first: the length
+    /// of a full trace. Bounded by the validation's [`MAX_ITERATIONS`].
+    pub(crate) fn trace_capacity(&self) -> usize {
+        self.max_iterations.max(self.record_max_iterations) + 1
+    }
 }
 
 /// A friction coefficient; `as_error` says whether a bad value is a config or parameter error
@@ -300,6 +313,16 @@ pub(crate) fn validate_params(p: &Params) -> Result<()> {
 }
 
 pub(crate) fn validate_solver(s: &SolverSettings) -> Result<()> {
+    for (name, cap) in [
+        ("max_iterations", s.max_iterations),
+        ("record_max_iterations", s.record_max_iterations),
+    ] {
+        if cap > MAX_ITERATIONS {
+            return Err(Error::Param(format!(
+                "solver {name} must be at most {MAX_ITERATIONS}, got {cap}"
+            )));
+        }
+    }
     if s.max_iterations == 0 {
         return Err(Error::Param(
             "solver max_iterations must be at least 1".into(),
@@ -366,5 +389,25 @@ mod tests {
         assert!(p.set(Param::Gravity, ParamValue::Scalar(1.0)).is_err());
         assert!(p.set(Param::H, ParamValue::Vector(Vec3::zeros())).is_err());
         assert_eq!(Param::from_name("mu"), None);
+    }
+
+    /// Iteration caps size the trace: a cap beyond MAX_ITERATIONS is refused by name.
+    #[test]
+    fn iteration_caps_are_bounded() {
+        let ok = SolverSettings::default();
+        assert!(validate_solver(&ok).is_ok());
+        for bad in [
+            SolverSettings {
+                max_iterations: 1 << 40,
+                ..ok.clone()
+            },
+            SolverSettings {
+                record_max_iterations: usize::MAX,
+                ..ok.clone()
+            },
+        ] {
+            let err = validate_solver(&bad).unwrap_err().to_string();
+            assert!(err.contains("at most 1000000"), "{err}");
+        }
     }
 }

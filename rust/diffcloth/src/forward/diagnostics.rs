@@ -65,7 +65,7 @@ impl Simulator {
 
     /// Records `(energy, residual)` of every PD iteration of the next steps (for studies).
     pub fn set_trace(&mut self, on: bool) {
-        self.trace = on.then(|| Vec::with_capacity(self.solver.max_iterations + 1));
+        self.trace = on.then(|| Vec::with_capacity(self.solver.trace_capacity()));
     }
 
     /// The `(energy, residual)` per iteration of the last step, if tracing.

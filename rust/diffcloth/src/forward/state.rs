@@ -99,7 +99,7 @@ impl Simulator {
             self.work.anderson = Anderson::new(solver.history, self.num_nodes());
         }
         if self.trace.is_some() {
-            self.trace = Some(Vec::with_capacity(solver.max_iterations + 1));
+            self.trace = Some(Vec::with_capacity(solver.trace_capacity()));
         }
         self.solver = solver;
         Ok(())

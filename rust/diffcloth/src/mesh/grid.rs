@@ -14,9 +14,13 @@ pub enum GridPlane {
     Xz,
 }
 
+/// Largest generated grid (nodes): its buffers would take several GB beyond this.
+pub const MAX_GRID_NODES: usize = 1_000_000;
+
 /// A `rows x cols` node grid of size `width x height`, centred at the origin, split into
 /// `2 (rows-1)(cols-1)` triangles with alternating diagonals (no shear bias).
 /// Node `(r, c)` has index `r * cols + c`; row 0 is at the low end of the second axis.
+/// At most [`MAX_GRID_NODES`] nodes.
 pub fn grid(
     rows: usize,
     cols: usize,
@@ -27,6 +31,11 @@ pub fn grid(
     if rows < 2 || cols < 2 {
         return Err(Error::Mesh(format!(
             "grid needs at least 2x2 nodes, got {rows}x{cols}"
+        )));
+    }
+    if rows.checked_mul(cols).is_none_or(|n| n > MAX_GRID_NODES) {
+        return Err(Error::Mesh(format!(
+            "grid of {rows}x{cols} nodes is larger than the {MAX_GRID_NODES} nodes allowed"
         )));
     }
     if !(width > 0.0 && height > 0.0) {
@@ -66,6 +75,15 @@ pub fn grid(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn huge_grids_are_refused_before_allocating() {
+        for (r, c) in [(100_000, 100_000), (usize::MAX, 3), (1001, 1000)] {
+            let err = grid(r, c, 1.0, 1.0, GridPlane::Xy).unwrap_err().to_string();
+            assert!(err.contains("larger than"), "{err}");
+        }
+        assert!(grid(1000, 1000, 1.0, 1.0, GridPlane::Xy).is_ok());
+    }
 
     #[test]
     fn grid_counts_and_area() {

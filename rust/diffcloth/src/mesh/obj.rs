@@ -5,13 +5,30 @@ use crate::error::{Error, Result};
 use crate::Vec3;
 use std::fmt::Write as _;
 
+/// Largest OBJ file read (bytes).
+pub const MAX_OBJ_BYTES: u64 = 512 << 20;
+
 /// Reads an OBJ file's `v` and `f` records. Face entries may be `i`, `i/t`, `i//n` or `i/t/n`,
-/// with negative (relative) indices allowed; other records are ignored.
+/// with negative (relative) indices allowed; other records are ignored. Only a regular file
+/// of at most [`MAX_OBJ_BYTES`] is read.
 pub fn read_obj(path: &std::path::Path) -> Result<TriMesh> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+    let io = |message: String| Error::Io {
         path: path.display().to_string(),
-        message: e.to_string(),
-    })?;
+        message,
+    };
+    // A device or pipe (/dev/zero, /dev/urandom) would be read forever or until memory runs
+    // out: only regular files, up to a size limit.
+    let meta = std::fs::metadata(path).map_err(|e| io(e.to_string()))?;
+    if !meta.is_file() {
+        return Err(io("not a regular file".into()));
+    }
+    if meta.len() > MAX_OBJ_BYTES {
+        return Err(io(format!(
+            "{} bytes is larger than the {MAX_OBJ_BYTES} bytes allowed for a mesh file",
+            meta.len()
+        )));
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| io(e.to_string()))?;
     parse_obj(&text).map_err(|e| match e {
         Error::Mesh(msg) => Error::Mesh(format!("{}: {msg}", path.display())),
         other => other,
@@ -96,6 +113,19 @@ pub fn write_obj(path: &std::path::Path, mesh: &TriMesh, positions: &[Vec3]) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn only_regular_files_are_read() {
+        for path in ["/dev/zero", "/dev/urandom", "/"] {
+            let err = read_obj(std::path::Path::new(path))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains(path) && err.contains("not a regular file"),
+                "{err}"
+            );
+        }
+    }
 
     #[test]
     fn parses_polygons_and_slashes() {
