@@ -8,7 +8,10 @@
 //! (Meyer et al. 2003), which makes `A_i x` the mean-curvature normal `2 H n` on any valence.
 //! Boundary vertices carry no constraint: their Laplacian is not a curvature.
 
-use super::{project_vec3_each, PdConstraints, Projections, Stiffness};
+use super::{
+    project_vec3_each, rescale_jacobian, rescale_to_rest_length, PdConstraints, Projections,
+    Stiffness,
+};
 use crate::mesh::TriMesh;
 use crate::Vec3;
 use nalgebra::Matrix3;
@@ -118,17 +121,8 @@ impl Bend {
     }
 
     fn project_one(&self, i: usize, x: &[Vec3]) -> (Vec3, f64) {
-        let v = self.curvature(i, x);
-        let target = self.rest_length[i];
-        let len = v.norm();
-        let p = if target == 0.0 {
-            Vec3::zeros()
-        } else if len > 0.0 {
-            v * (target / len)
-        } else {
-            self.rest_vector[i]
-        };
-        (p, 0.5 * self.weight[i] * (v - p).norm_squared())
+        let (target, fallback) = (self.rest_length[i], self.rest_vector[i]);
+        rescale_to_rest_length(self.curvature(i, x), target, fallback, self.weight[i])
     }
 }
 
@@ -150,14 +144,7 @@ impl Bend {
     /// Jacobian of the projection `p = r v / |v|` at `v = A_i x`: `(r / |v|)(I - v^ v^T)`
     /// (zero on a flat rest shape, where `p = 0`).
     pub fn projection_jacobian(&self, i: usize, x: &[Vec3]) -> nalgebra::Matrix3<f64> {
-        let r = self.rest_length[i];
-        let v = self.curvature(i, x);
-        let len = v.norm();
-        if r == 0.0 || len == 0.0 {
-            return nalgebra::Matrix3::zeros();
-        }
-        let n = v / len;
-        (r / len) * (nalgebra::Matrix3::identity() - n * n.transpose())
+        rescale_jacobian(self.curvature(i, x), self.rest_length[i])
     }
 }
 

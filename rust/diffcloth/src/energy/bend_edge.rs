@@ -23,7 +23,10 @@
 //! the PD weight `w = W^2 = 3 k_bend / (A0 + A1)` (Bergou's `Q = 3 / (A0 + A1) K^T K`).
 //! Boundary and non-manifold edges carry no constraint.
 
-use super::{project_vec3_each, PdConstraints, Projections, Stiffness};
+use super::{
+    project_vec3_each, rescale_jacobian, rescale_to_rest_length, PdConstraints, Projections,
+    Stiffness,
+};
 use crate::mesh::TriMesh;
 use crate::Vec3;
 use nalgebra::Matrix3;
@@ -142,30 +145,14 @@ impl BendEdge {
     }
 
     fn project_one(&self, i: usize, x: &[Vec3]) -> (Vec3, f64) {
-        let e = self.edge_vector(i, x);
-        let target = self.rest_length[i];
-        let len = e.norm();
-        let p = if target == 0.0 {
-            Vec3::zeros()
-        } else if len > 0.0 {
-            e * (target / len)
-        } else {
-            self.rest_vector[i]
-        };
-        (p, 0.5 * self.weight[i] * (e - p).norm_squared())
+        let (target, fallback) = (self.rest_length[i], self.rest_vector[i]);
+        rescale_to_rest_length(self.edge_vector(i, x), target, fallback, self.weight[i])
     }
 
     /// Jacobian of `p = n e / |e|` at `e = A_i x`: `(n / |e|)(I - e^ e^T)` (zero when `n = 0`
     /// or `|e| = 0`).
     pub fn projection_jacobian(&self, i: usize, x: &[Vec3]) -> Matrix3<f64> {
-        let n = self.rest_length[i];
-        let e = self.edge_vector(i, x);
-        let len = e.norm();
-        if n == 0.0 || len == 0.0 {
-            return Matrix3::zeros();
-        }
-        let u = e / len;
-        (n / len) * (Matrix3::identity() - u * u.transpose())
+        rescale_jacobian(self.edge_vector(i, x), self.rest_length[i])
     }
 }
 

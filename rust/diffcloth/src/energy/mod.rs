@@ -123,6 +123,32 @@ pub(crate) fn project_vec3_each(
     energy.iter().sum()
 }
 
+/// The bending models' projection: `v` rescaled to its rest length `target` (`0` on a flat
+/// rest shape; `fallback`, the rest vector, when `v` vanishes exactly), and the energy
+/// `w / 2 |v - p|^2`.
+pub(crate) fn rescale_to_rest_length(v: Vec3, target: f64, fallback: Vec3, w: f64) -> (Vec3, f64) {
+    let len = v.norm();
+    let p = if target == 0.0 {
+        Vec3::zeros()
+    } else if len > 0.0 {
+        v * (target / len)
+    } else {
+        fallback
+    };
+    (p, 0.5 * w * (v - p).norm_squared())
+}
+
+/// Jacobian of [`rescale_to_rest_length`]: `(target / |v|)(I - v^ v^T)`, zero when
+/// `target = 0` or `|v| = 0`.
+pub(crate) fn rescale_jacobian(v: Vec3, target: f64) -> nalgebra::Matrix3<f64> {
+    let len = v.norm();
+    if target == 0.0 || len == 0.0 {
+        return nalgebra::Matrix3::zeros();
+    }
+    let u = v / len;
+    (target / len) * (nalgebra::Matrix3::identity() - u * u.transpose())
+}
+
 /// Which physical parameter scales a constraint set's weights.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Stiffness {
