@@ -63,18 +63,20 @@ impl PySimulator {
         let forces = external_forces
             .map(|a| read_nodes("external_forces", &a))
             .transpose()?;
-        let sim = &mut self.inner;
-        let stats = guarded(py, || {
-            let mut last = StepStats::default();
-            for _ in 0..steps {
-                last = sim.step(StepInput {
+        let mut last = StepStats::default();
+        for _ in 0..steps {
+            let sim = &mut self.inner;
+            last = guarded(py, || {
+                sim.step(StepInput {
                     attachment_targets: targets.as_deref(),
                     external_forces: forces.as_deref(),
-                })?;
-            }
-            Ok(last)
-        })?;
-        stats_dict(py, stats)
+                })
+            })?;
+            // Ctrl-C between steps raises KeyboardInterrupt with the simulator at the last
+            // completed step (the GIL is taken back once per step: microseconds).
+            py.check_signals()?;
+        }
+        stats_dict(py, last)
     }
 
     #[getter]
