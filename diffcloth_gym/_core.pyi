@@ -30,9 +30,9 @@ class Simulator:
         self,
         attachment_targets: npt.NDArray[np.float64] | None = None,
         external_forces: npt.NDArray[np.float64] | None = None,
-        steps: int = 1,
+        steps: int | None = None,
     ) -> dict[str, Any]:
-        """Advances `steps` steps with the same inputs; returns the last step's stats."""
+        """Advances `steps` steps (None: 1) with the same inputs; returns the last step's stats."""
     @property
     def positions(self) -> npt.NDArray[np.float64]:
         """Node positions, (n, 3)."""

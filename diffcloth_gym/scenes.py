@@ -34,6 +34,9 @@ def load_config(config: str | Path | Mapping[str, Any]) -> tuple[dict, Path]:
     file, or a dict with the same structure as the TOML files (its base is the working folder).
     An unknown name raises :class:`~diffcloth_gym.errors.ConfigError` listing the shipped ones.
     """
+    if not isinstance(config, (str, Path, Mapping)):
+        raise ConfigError(
+            f"config must be a scene name, a TOML path or a dict, got {type(config).__name__}")
     if isinstance(config, Mapping):
         return dict(config), Path.cwd()
     path = Path(config)

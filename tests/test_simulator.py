@@ -302,3 +302,28 @@ def test_ctrl_c_interrupts_a_long_step_call():
     words = out.split()
     assert words[0] == "interrupted", out
     assert 0 < int(words[1]) < 10**7
+
+
+@pytest.mark.parametrize("call", [
+    lambda s: s._core.obstacle_distance(-1),
+    lambda s: s._core.set_obstacle_mu(-1, 0.1),
+    lambda s: s.set_recording(True, checkpoint_every=-1),
+    lambda s: s._core.step(None, None, 10**30),
+    lambda s: s._core.step(None, None, -3),
+    lambda s: s.backward(dl_dx=None, max_iterations=-1),
+])
+def test_bad_integers_raise_input_errors_naming_the_argument(small, call):
+    """Issue 11 item 6 (part): negative or oversized integers raised OverflowError."""
+    small.set_recording(True)
+    small.step()
+    with pytest.raises(diffcloth_gym.InputError, match="must be a non-negative integer"):
+        call(small)
+    small.step()
+
+
+def test_wrong_types_raise_errors_naming_the_argument(small):
+    """Issue 11 item 6 (part): these raised TypeError."""
+    with pytest.raises(diffcloth_gym.ConfigError, match="config must be"):
+        Simulator.from_config(None)
+    with pytest.raises(diffcloth_gym.ParameterError, match="mu must be a number"):
+        small._core.set_self_mu(None)

@@ -1,7 +1,7 @@
 //! Conversions between numpy arrays / dicts and the core's types. Everything returned to
 //! Python is a fresh copy: callers may keep or mutate it without touching the simulator.
 
-use crate::errors::InputError;
+use crate::errors::{InputError, ParameterError};
 use diffcloth::{
     Branch, Contact, ContactKind, Gradients, Param, ParamValue, Profile, StepStats, Vec3,
 };
@@ -189,4 +189,24 @@ pub(crate) fn set_param_item(
         ParamValue::Scalar(x) => d.set_item(name.name(), x),
         ParamValue::Vector(v) => d.set_item(name.name(), v.as_slice().to_vec()),
     }
+}
+
+/// A non-negative integer argument (an index or a count). Anything else, negative or beyond
+/// 64 bits included, is an `InputError` naming the argument, not pyo3's `OverflowError` or
+/// `TypeError`.
+pub(crate) fn usize_arg(name: &str, value: &Bound<'_, PyAny>) -> PyResult<usize> {
+    value.extract::<usize>().map_err(|_| {
+        let shown = value.repr().map_or_else(|_| "?".into(), |r| r.to_string());
+        InputError::new_err(format!(
+            "{name} must be a non-negative integer of at most 64 bits, got {shown}"
+        ))
+    })
+}
+
+/// A number argument; anything else is a `ParameterError` naming it.
+pub(crate) fn f64_arg(name: &str, value: &Bound<'_, PyAny>) -> PyResult<f64> {
+    value.extract::<f64>().map_err(|_| {
+        let shown = value.repr().map_or_else(|_| "?".into(), |r| r.to_string());
+        ParameterError::new_err(format!("{name} must be a number, got {shown}"))
+    })
 }

@@ -2,8 +2,8 @@
 //! runs the core through `guarded` (GIL released, panics caught) and converts the result.
 
 use crate::conv::{
-    contacts_dict, gradients_dict, nodes_to_py, pairs_to_py, profile_dict, read_nodes, read_steps,
-    set_param_item, stats_dict, triangles_to_py,
+    contacts_dict, f64_arg, gradients_dict, nodes_to_py, pairs_to_py, profile_dict, read_nodes,
+    read_steps, set_param_item, stats_dict, triangles_to_py, usize_arg,
 };
 use crate::errors::{guarded, InputError, ParameterError};
 use diffcloth::{
@@ -48,15 +48,16 @@ impl PySimulator {
         guarded(py, || sim.reset(x.as_deref(), v.as_deref()))
     }
 
-    /// Advances `steps` steps with the same inputs; returns the last step's stats.
-    #[pyo3(signature = (attachment_targets=None, external_forces=None, steps=1))]
+    /// Advances `steps` steps (None: 1) with the same inputs; returns the last step's stats.
+    #[pyo3(signature = (attachment_targets=None, external_forces=None, steps=None))]
     fn step<'py>(
         &mut self,
         py: Python<'py>,
         attachment_targets: Option<PyReadonlyArray2<'_, f64>>,
         external_forces: Option<PyReadonlyArray2<'_, f64>>,
-        steps: usize,
+        steps: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let steps = steps.map_or(Ok(1), |s| usize_arg("steps", s))?;
         let targets = attachment_targets
             .map(|a| read_nodes("attachment_targets", &a))
             .transpose()?;
@@ -241,7 +242,8 @@ impl PySimulator {
     }
 
     /// Signed distance of every node to obstacle `index` at the current time, shape (n,).
-    fn obstacle_distance(&self, index: usize) -> PyResult<Vec<f64>> {
+    fn obstacle_distance(&self, index: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
+        let index = usize_arg("index", index)?;
         let obstacles = self.inner.obstacles();
         let Some(o) = obstacles.get(index) else {
             return Err(InputError::new_err(format!(
@@ -258,13 +260,20 @@ impl PySimulator {
     }
 
     /// Sets the friction coefficient of obstacle `index`.
-    fn set_obstacle_mu(&mut self, py: Python<'_>, index: usize, mu: f64) -> PyResult<()> {
+    fn set_obstacle_mu(
+        &mut self,
+        py: Python<'_>,
+        index: &Bound<'_, PyAny>,
+        mu: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let (index, mu) = (usize_arg("index", index)?, f64_arg("mu", mu)?);
         let sim = &mut self.inner;
         guarded(py, || sim.set_obstacle_mu(index, mu))
     }
 
     /// Sets the self-contact friction coefficient.
-    fn set_self_mu(&mut self, py: Python<'_>, mu: f64) -> PyResult<()> {
+    fn set_self_mu(&mut self, py: Python<'_>, mu: &Bound<'_, PyAny>) -> PyResult<()> {
+        let mu = f64_arg("mu", mu)?;
         let sim = &mut self.inner;
         guarded(py, || sim.set_self_mu(mu))
     }
@@ -273,7 +282,14 @@ impl PySimulator {
     /// checkpoint_every = K only every K-th state (plus each step's inputs) is kept and
     /// backward re-simulates segments.
     #[pyo3(signature = (on, checkpoint_every=None))]
-    fn set_recording(&mut self, on: bool, checkpoint_every: Option<usize>) -> PyResult<()> {
+    fn set_recording(
+        &mut self,
+        on: bool,
+        checkpoint_every: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        let checkpoint_every = checkpoint_every
+            .map(|k| usize_arg("checkpoint_every", k))
+            .transpose()?;
         match (on, checkpoint_every) {
             (true, Some(0)) => Err(ParameterError::new_err(
                 "checkpoint_every must be at least 1",
@@ -305,8 +321,11 @@ impl PySimulator {
         dl_dv: Option<PyReadonlyArray3<'_, f64>>,
         solver: Option<&str>,
         tolerance: Option<f64>,
-        max_iterations: Option<usize>,
+        max_iterations: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let max_iterations = max_iterations
+            .map(|m| usize_arg("max_iterations", m))
+            .transpose()?;
         let defaults = BackwardOptions::default();
         let solver = match solver {
             None => defaults.solver,
