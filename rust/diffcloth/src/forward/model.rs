@@ -158,8 +158,13 @@ impl Model {
             self.apply_matrix_params();
             let triplets = self.system_triplets();
             if let Err(e) = self.factor.refactor(&triplets) {
+                // Back to the old matrix, which factored before: the model is unchanged.
                 self.params = old;
                 self.apply_matrix_params();
+                let triplets = self.system_triplets();
+                self.factor
+                    .refactor(&triplets)
+                    .expect("the previous matrix factored before");
                 return Err(e);
             }
         }

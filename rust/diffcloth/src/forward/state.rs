@@ -59,12 +59,11 @@ impl Simulator {
             return Ok(());
         }
         let start = Instant::now();
-        let mut model = Arc::clone(&self.model);
-        if Arc::make_mut(&mut model).set_params(params)? {
+        // Copies the model only if another simulator or a tape shares it.
+        if Arc::make_mut(&mut self.model).set_params(params)? {
             self.profile.refactorizations += 1;
             self.profile.refactor += start.elapsed();
         }
-        self.model = model;
         Ok(())
     }
 
