@@ -8,3 +8,4 @@ mod gradients;
 mod model_sharing;
 mod pd_solver;
 mod scenes;
+mod tape;
