@@ -115,7 +115,9 @@ translate = [{offset_x}, 0.85, 0.0]
 [material]
 density = 0.2
 k_stretch = 200.0
-k_bend = 0.001
+# A quarter of the 0.001 tuned for the per-vertex model (the edge model stores 3-4.5x its
+# energy in the same bend).
+k_bend = 0.00025
 [contact]
 thickness = 0.01
 [[obstacles]]
@@ -153,7 +155,10 @@ fn napkin_on_a_sphere_and_a_plane_never_penetrates_and_comes_to_rest() {
         let mut sim = drop_scene(shape, 0.5, 0.0);
         let thickness = sim.contact_settings().thickness;
         let mut peak: f64 = 0.0;
-        for step in 0..400 {
+        // 600 steps: draped over the sphere the cloth settles slowly by sliding (kinetic /
+        // peak at steps 300/400/500/600: per-vertex model 2e-5/1e-5/4e-6/6e-6, edge model
+        // 3e-4/1.3e-4/2e-5/9e-7), so 400 steps measured how long the settling takes.
+        for step in 0..600 {
             sim.step(StepInput::default()).unwrap();
             let d = min_distance(&sim);
             assert!(

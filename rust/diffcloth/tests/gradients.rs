@@ -26,6 +26,9 @@ thread_local! {
     /// order decides it), so branch labels may change while no node's motion does; and x0 is
     /// perturbed horizontally only (see the loop test).
     static REDUNDANT_CONTACTS: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+    /// Step of the attachment-target difference (before `eps_factor`); a scene whose loss
+    /// curves strongly in the targets sets a smaller one.
+    static TARGETS_EPS: std::cell::Cell<f64> = const { std::cell::Cell::new(1e-4) };
 }
 
 fn run(sim: &mut Simulator, r: &Rollout, loss: &Loss, record: bool) -> f64 {
@@ -203,7 +206,7 @@ fn check_all_gradients(
         check(
             "attachment targets",
             analytic,
-            fd(1e-4, &|r, e| {
+            fd(TARGETS_EPS.with(|e| e.get()), &|r, e| {
                 for (t, d) in r.targets.iter_mut().zip(&dt) {
                     t.iter_mut().zip(d).for_each(|(x, dd)| *x += e * dd);
                 }
@@ -241,9 +244,12 @@ fn check_all_gradients(
         );
     }
     let scale = |v: f64| v.abs().max(1.0);
+    // k_bend is perturbed relative to itself, as k_attach and density are: scenes use values
+    // far below 1 (0.005 here), where a unit scale made a 1e-4 step a 2 % change and the
+    // check measured the loss's curvature in k_bend (rel 1.3e-3), not the gradient.
     let (ks, kb, rho) = (
         scale(base.params.k_stretch),
-        scale(base.params.k_bend),
+        base.params.k_bend,
         base.params.density,
     );
     check(
@@ -315,7 +321,9 @@ plane = "xy"
 [material]
 density = 0.2
 k_stretch = 80.0
-k_bend = 0.02
+# A quarter of the 0.02 this test used with the per-vertex model (the edge model stores
+# 3-4.5x its energy in the same bend).
+k_bend = 0.005
 strain_limits = [1.0, 1.0]
 [attachments]
 stiffness = 500.0
@@ -324,9 +332,13 @@ select = "top_corners"
 direction = [0.1, 0.0, 0.4]
 omega = 5.0
 phi = 0.3
+# A fixed iteration count (no stopping test), as for the garments below: a tolerance of 1e-13
+# let the +eps and -eps rollouts stop at different iterations, loss noise ~1e-10, which cost
+# the small wind-omega gradient 1.6e-4 (3.5e-4 at eps/3, 1.9e-3 at eps/10: noise). 150
+# Anderson iterations reach machine precision (the stopping test needed ~33); errors < 1e-6.
 [solver]
-tolerance = 1e-13
-max_iterations = 20000
+tolerance = 0.0
+max_iterations = 150
 "#,
     );
     let steps = 12;
@@ -395,7 +407,14 @@ fn garment_rollout(sim: &Simulator, steps: usize, seed: u64, drift: Vec3) -> Rol
 /// The hat's curved rest shape makes the bending projection Jacobian non-zero.
 #[test]
 fn gradients_match_finite_differences_on_the_hat() {
-    let mut sim = contact_free_garment("hat", 600);
+    // 2000 iterations: with the paper's k_bend 120 in the edge model, 600 stop at updates of
+    // 1e-14..3e-14 in the last steps, and that remaining error alone cost density 1.4e-4 and
+    // gravity 2.8e-5 (growing as eps shrinks: noise, not truncation); at 2000 both are < 1e-6.
+    let mut sim = contact_free_garment("hat", 2000);
+    // The loss curves in the targets (the stiff hat pulled by two handles): at eps 1e-4 the
+    // central difference is off by 2.4e-4, falling as eps^2 (3.5e-3 at 3e-4, 1.8e-5 at 3e-5);
+    // at 1e-5 the error is 2e-8.
+    TARGETS_EPS.with(|e| e.set(1e-5));
     let steps = 6;
     let base = garment_rollout(&sim, steps, 5, Vec3::new(0.0, 0.02, 0.0));
     check_all_gradients(
