@@ -117,3 +117,50 @@ class Simulator:
         """Principal stretches (s1 >= s2) of every triangle, (t, 2)."""
     def write_obj(self, path: str) -> None:
         """Writes the current state as an OBJ file."""
+
+class Batch:
+    """N simulators sharing one model (one factorization), stepped in parallel; arrays carry the member index first."""
+
+    def __init__(self, sim: Simulator, size: int) -> None:
+        """`size` simulators on `sim`'s model and solver settings, at the rest state, not recording."""
+    def __len__(self) -> int:
+        """Number of members."""
+    def reset(
+        self,
+        index: int,
+        x: npt.NDArray[np.float64] | None = None,
+        v: npt.NDArray[np.float64] | None = None,
+    ) -> None:
+        """Resets member `index` ((n, 3) arrays; default rest shape and zero velocity); clears its tape."""
+    def set_recording(self, on: bool) -> None:
+        """Starts (clearing the tapes) or stops recording on every member."""
+    def step(
+        self,
+        attachment_targets: npt.NDArray[np.float64] | None = None,
+        external_forces: npt.NDArray[np.float64] | None = None,
+    ) -> list[Exception | None]:
+        """One step of every member in parallel ((N, k, 3) targets, (N, n, 3) forces); per member None or the error it raised (not raised here)."""
+    def positions(self) -> npt.NDArray[np.float64]:
+        """Positions of every member, (N, n, 3)."""
+    def velocities(self) -> npt.NDArray[np.float64]:
+        """Velocities of every member, (N, n, 3)."""
+    def attachment_targets(self) -> npt.NDArray[np.float64]:
+        """Attachment targets in effect of every member, (N, k, 3)."""
+    def step_counts(self) -> list[int]:
+        """Steps taken since each member's reset."""
+    def tape_lengths(self) -> list[int]:
+        """Recorded steps on each member's tape (0 when not recording)."""
+    def last_steps(self) -> list[dict[str, Any]]:
+        """The last step's solver stats of each member."""
+    def profile(self, index: int) -> dict[str, Any]:
+        """The profile (times, iteration and contact counts) of member `index`."""
+    def backward_step(
+        self,
+        step: int,
+        dl_dx: npt.NDArray[np.float64],
+        dl_dv: npt.NDArray[np.float64],
+        solver: str | None = None,
+        tolerance: float | None = None,
+        max_iterations: int | None = None,
+    ) -> dict[str, Any]:
+        """One-step adjoint of recorded step `step` on every member: gradients on its inputs (x, v, attachment_targets, external_forces) and warnings."""

@@ -6,6 +6,7 @@
 
 pub mod anderson;
 pub mod backward;
+pub mod batch;
 pub mod collision;
 pub mod config;
 pub mod contact;
@@ -25,7 +26,8 @@ pub mod tape;
 /// 3-vectors are nalgebra's (node positions, velocities, forces).
 pub type Vec3 = nalgebra::Vector3<f64>;
 
-pub use backward::{AdjointSolver, BackwardOptions, Gradients};
+pub use backward::{AdjointSolver, AdjointWarmStart, BackwardOptions, Gradients};
+pub use batch::{Batch, MemberInput};
 pub use config::{BendModel, Effect, SceneConfig};
 pub use contact::{Branch, BranchCounts, Contact, ContactKind};
 pub use error::{Error, Result};

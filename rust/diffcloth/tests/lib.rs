@@ -1,4 +1,5 @@
 //! Integration tests of the simulator: each checks a physical fact, not only that it runs.
+mod batch;
 mod bend_models;
 mod common;
 mod contact;

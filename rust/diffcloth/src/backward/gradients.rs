@@ -38,6 +38,17 @@ pub struct Gradients {
 }
 
 impl Gradients {
+    /// Zero gradients for a tape of `steps` steps and `obstacles` obstacles.
+    pub(super) fn zeros(steps: usize, obstacles: usize) -> Self {
+        Self {
+            mu_obstacles: vec![0.0; obstacles],
+            attachment_targets: vec![Vec::new(); steps],
+            external_forces: vec![Vec::new(); steps],
+            steps: vec![AdjointStepStats::default(); steps],
+            ..Default::default()
+        }
+    }
+
     /// The gradient with respect to a parameter, by the shared name table (None for `h`).
     pub fn param(&self, p: Param) -> Option<ParamValue> {
         use ParamValue::{Scalar, Vector};

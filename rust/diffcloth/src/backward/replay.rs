@@ -4,9 +4,7 @@
 use super::contact::{linearize_contacts, ContactCoupling};
 use super::operator::{AdjointOperator, Linearization};
 use super::solvers::SolveWork;
-use super::{
-    AdjointSolver, AdjointStepStats, BackwardOptions, Gradients, TRUSTED_FORWARD_RESIDUAL,
-};
+use super::{AdjointSolver, BackwardOptions, Gradients, TRUSTED_FORWARD_RESIDUAL};
 use crate::error::{Error, Result};
 use crate::forward::Simulator;
 use crate::tape::{StepRecord, Tape};
@@ -160,13 +158,7 @@ impl Simulator {
             mut z,
             z_previous,
         } = resume.unwrap_or_else(|| Resume {
-            grads: Gradients {
-                mu_obstacles: vec![0.0; self.obstacles().len()],
-                attachment_targets: vec![Vec::new(); steps],
-                external_forces: vec![Vec::new(); steps],
-                steps: vec![AdjointStepStats::default(); steps],
-                ..Default::default()
-            },
+            grads: Gradients::zeros(steps, self.obstacles().len()),
             carry_x: vec![Vec3::zeros(); n],
             carry_v: vec![Vec3::zeros(); n],
             z: vec![Vec3::zeros(); n],
@@ -278,6 +270,11 @@ fn validate(
             }
         }
     }
+    validate_options(options)
+}
+
+/// Checks the adjoint solver options.
+pub(super) fn validate_options(options: &BackwardOptions) -> Result<()> {
     if !(options.tolerance > 0.0 && options.tolerance.is_finite()) || options.max_iterations == 0 {
         return Err(Error::Param(
             "backward tolerance must be positive and max_iterations at least 1".into(),
