@@ -130,13 +130,13 @@ tube radius is 0.9) of its target.
 from __future__ import annotations
 
 import math
-from numbers import Real
 from typing import Any, Mapping
 
 import numpy as np
 import torch
 
 from ..errors import ConfigError, InputError
+from ._common import halton, merge_config, number, rotation, start_values, vector3
 from .task import ClothTask, Drive, Start
 
 HOOK_NAMES = ("hook_toe", "hook_sole", "hook_side_pos", "hook_side_neg")
@@ -158,21 +158,11 @@ _DEFAULTS: dict[str, Any] = {
 }
 
 
-def _halton(index: int, base: int) -> float:
-    """The ``index``-th element (from 1) of the van der Corput sequence in ``base``."""
-    f, r = 1.0, 0.0
-    while index > 0:
-        f /= base
-        r += f * (index % base)
-        index //= base
-    return r
-
-
 def _test_starts() -> tuple[tuple[float, float, float, float], ...]:
     lo, hi, yaw = _DEFAULTS["start_offset_low"], _DEFAULTS["start_offset_high"], _DEFAULTS["start_yaw_deg"]
     starts = []
     for i in range(1, 21):
-        u = [_halton(i, b) for b in (2, 3, 5, 7)]
+        u = [halton(i, b) for b in (2, 3, 5, 7)]
         d = [round(lo[k] + u[k] * (hi[k] - lo[k]), 3) for k in range(3)]
         starts.append((d[0], d[1], d[2], round(-yaw + u[3] * 2 * yaw, 3)))
     return tuple(starts)
@@ -181,45 +171,6 @@ def _test_starts() -> tuple[tuple[float, float, float, float], ...]:
 #: 20 fixed starts ``(dx, dy, dz, yaw_deg)`` spread over the default start range (Halton
 #: points in bases 2, 3, 5, 7), for evaluation: ``reset(options={"start": TEST_STARTS[i]})``.
 TEST_STARTS = _test_starts()
-
-
-def _merge_config(defaults: Mapping[str, Any], config: Mapping[str, Any] | None, env: str) -> dict:
-    cfg = dict(defaults)
-    unknown = sorted(set(config or {}) - set(defaults))
-    if unknown:
-        raise ConfigError(f"{env}: unknown argument(s) {unknown}; known: {sorted(defaults)}")
-    cfg.update(config or {})
-    return cfg
-
-
-def _number(cfg: Mapping[str, Any], key: str, lo: float = -math.inf, hi: float = math.inf,
-            open_lo: bool = False) -> float:
-    v = cfg[key]
-    if isinstance(v, bool) or not isinstance(v, Real) or not math.isfinite(v) or v < lo or v > hi \
-            or (open_lo and v == lo):
-        raise ConfigError(f"{key} must be a finite number in {'(' if open_lo else '['}{lo}, {hi}], got {v!r}")
-    return float(v)
-
-
-def _vector3(cfg: Mapping[str, Any], key: str) -> np.ndarray:
-    v = cfg[key]
-    try:
-        a = np.asarray(v, dtype=np.float64)
-    except (TypeError, ValueError):
-        a = None
-    if a is None or a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise ConfigError(f"{key} must be 3 finite numbers, got {v!r}")
-    return a
-
-
-def _rotation(deg_xyz) -> np.ndarray:
-    """``Rz @ Ry @ Rx`` (the scene placement's convention: x, then y, then z)."""
-    rx, ry, rz = (math.radians(float(a)) for a in deg_xyz)
-    cx, sx, cy, sy, cz, sz = math.cos(rx), math.sin(rx), math.cos(ry), math.sin(ry), math.cos(rz), math.sin(rz)
-    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return Rz @ Ry @ Rx
 
 
 def _capsules(shape: Any):
@@ -295,7 +246,7 @@ def worn_shape(scene: Mapping[str, Any], rest_positions: np.ndarray) -> np.ndarr
     builds the sock around the foot and leg; ``placement`` maps ``p -> R (s p) + t``)."""
     pl = scene.get("placement", {}) or {}
     s = float(pl.get("scale", 1.0))
-    R = _rotation(pl.get("rotate_deg", [0.0, 0.0, 0.0]))
+    R = rotation(pl.get("rotate_deg", [0.0, 0.0, 0.0]))
     t = np.asarray(pl.get("translate", [0.0, 0.0, 0.0]), dtype=np.float64)
     return (np.asarray(rest_positions, dtype=np.float64) - t) @ R / s
 
@@ -313,23 +264,23 @@ class SockTask(ClothTask):
 
     def __init__(self, scene: Mapping[str, Any], rest_positions: np.ndarray, handles: list[int],
                  config: Mapping[str, Any]):
-        cfg = _merge_config(_DEFAULTS, config, "Sock-v0")
+        cfg = merge_config(_DEFAULTS, config, "Sock-v0")
         self.config = cfg
-        self.action_scale = _number(cfg, "action_scale", 0.0, open_lo=True)
-        self.start_low = _vector3(cfg, "start_offset_low")
-        self.start_high = _vector3(cfg, "start_offset_high")
+        self.action_scale = number(cfg, "action_scale", 0.0, open_lo=True)
+        self.start_low = vector3(cfg, "start_offset_low")
+        self.start_high = vector3(cfg, "start_offset_high")
         if np.any(self.start_low > self.start_high):
             raise ConfigError(f"start_offset_low {cfg['start_offset_low']} exceeds start_offset_high "
                               f"{cfg['start_offset_high']}")
-        self.start_yaw = _number(cfg, "start_yaw_deg", 0.0, 180.0)
+        self.start_yaw = number(cfg, "start_yaw_deg", 0.0, 180.0)
         k = cfg["keypoint_nodes"]
         if isinstance(k, bool) or not isinstance(k, int) or k < 1:
             raise ConfigError(f"keypoint_nodes must be a positive integer, got {k!r}")
-        hook_fraction = _number(cfg, "hook_fraction", 0.0, 1.0, open_lo=True)
+        hook_fraction = number(cfg, "hook_fraction", 0.0, 1.0, open_lo=True)
         if cfg["reward"] not in ("dense", "sparse"):
             raise ConfigError(f"reward must be 'dense' or 'sparse', got {cfg['reward']!r}")
         self.dense = cfg["reward"] == "dense"
-        self.success_distance = _number(cfg, "success_distance", 0.0, open_lo=True)
+        self.success_distance = number(cfg, "success_distance", 0.0, open_lo=True)
 
         rest = np.asarray(rest_positions, dtype=np.float64)
         n = rest.shape[0]
@@ -382,19 +333,14 @@ class SockTask(ClothTask):
         return self.start((float(d[0]), float(d[1]), float(d[2]), float(yaw)))
 
     def start(self, spec: Any) -> Start:
-        try:
-            vals = [float(s) for s in spec] if not isinstance(spec, (str, bytes, Mapping)) else None
-        except (TypeError, ValueError):
-            vals = None
-        if vals is None or len(vals) != 4 or not all(math.isfinite(s) for s in vals):
-            raise InputError(f"start must be 4 finite numbers (dx, dy, dz, yaw_deg), got {spec!r}")
+        vals = start_values(spec, ("dx", "dy", "dz", "yaw_deg"))
         d, yaw = np.array(vals[:3]), vals[3]
         eps = 1e-9
         if np.any(d < self.start_low - eps) or np.any(d > self.start_high + eps) or abs(yaw) > self.start_yaw + eps:
             raise InputError(
                 f"start {tuple(vals)} is out of range: (dx, dy, dz) in [{self.start_low.tolist()}, "
                 f"{self.start_high.tolist()}], yaw_deg in [-{self.start_yaw}, {self.start_yaw}]")
-        R = _rotation([0.0, yaw, 0.0])
+        R = rotation([0.0, yaw, 0.0])
         x = (self.rest - self._start_centre) @ R.T + self._start_centre + d
         return Start(x=x, v=np.zeros_like(x), control=x[self.handles].copy())
 
