@@ -123,10 +123,11 @@ def test_test_starts_are_distinct_in_range_and_outside_the_obstacles(task, sim):
     span = np.concatenate([hi - lo, [2 * yaw]])
     assert np.all(arr.max(0) - arr.min(0) > 0.75 * span)
     rng = np.random.default_rng(0)
-    starts = [task.start(s) for s in TEST_STARTS] + [task.sample_start(rng) for _ in range(10)]
+    corners = [(dx, dy, 0.0, yaw) for dx in (-1.0, 0.0, 1.0) for dy in (-1.0, 1.0) for yaw in (-45.0, 45.0)]
+    starts = [task.start(s) for s in TEST_STARTS + tuple(corners)] + [task.sample_start(rng) for _ in range(10)]
     for s in starts:
         sim.reset(x=s.x)
-        assert sim.obstacle_distance(0).min() > 0.8
+        assert sim.obstacle_distance(0).min() > 0.75
         assert np.allclose(s.control, s.x[task.handles]) and not s.v.any()
         # A start is a rigid motion of the rest shape.
         assert np.allclose(np.linalg.norm(s.x[1:] - s.x[:-1], axis=1),

@@ -54,9 +54,10 @@ step N/2 as in the paper (the reference code uses 0.62 N, counted three times).
 `Box(-1, 1, (12,), float64)`: for each effector in handle order (+x, +z, -x, -z rim node of
 the worn sock) a displacement (x, y, z). The new effector position is the previous one plus
 `action_scale * action` (scene length units; default 0.05 per step, i.e. at most 8 units/s per
-axis at h = 1/160 s: in 400 steps an effector can travel 20 units along each axis, several
-times the 12 or so units from the start over the toes to the leg top). Effector positions are
-not bounded otherwise.
+axis at h = 1/160 s: 10 units per axis in each half of the episode, while the opening's path
+from the start down to the tip of the foot and then back along the foot and up the leg needs
+about 5.4 down and 1.7 back in the first half and 5.4 up and 5.8 back in the second). Effector
+positions are not bounded otherwise.
 
 ## Observation Space
 
@@ -97,8 +98,9 @@ heel 0.8 in front of the toes) turned by `yaw` degrees about the vertical axis t
 opening centre and moved by `(dx, dy, dz)`, at rest; the effectors at the handle nodes.
 `reset(seed=...)` draws `dx, dy, dz` uniformly in `[start_offset_low, start_offset_high]`
 (default `[-1, -1, 0]` to `[1, 1, 2]`: dz >= 0 never brings the sock closer to the toes) and
-`yaw` uniformly in `[-start_yaw_deg, start_yaw_deg]` (default 45). Every start of that range
-keeps the sock at least 0.8 units out of the foot and the leg. `reset(options={"start": (dx, dy,
+`yaw` uniformly in `[-start_yaw_deg, start_yaw_deg]` (default 45). Every start of the default
+range keeps the sock at least 0.75 units out of the foot and the leg (0.76 at the closest, yaw
++-45 degrees with dz = 0, on a grid scan of the range). `reset(options={"start": (dx, dy,
 dz, yaw_deg)})` sets one (out of range raises `InputError`);
 `diffcloth_gym.envs.sock_v0.TEST_STARTS` holds 20 fixed starts spread over the default range
 (the first 20 points of the Halton sequence in bases 2, 3, 5, 7).
