@@ -23,6 +23,9 @@ from diffcloth_gym.errors import (
 )
 from diffcloth_gym.scenes import CONFIG_DIR, contact_free, load_scene, scene_names
 from diffcloth_gym.simulator import Simulator
+from diffcloth_gym.envs import register_envs
+
+register_envs()
 
 __all__ = [
     "CONFIG_DIR",

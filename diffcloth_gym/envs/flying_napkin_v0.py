@@ -92,7 +92,9 @@ import torch
 
 from ..errors import ConfigError, InputError
 from ._common import halton, merge_config, number, rotation, start_values, vector3
+from .base import ClothEnv
 from .task import ClothTask, Drive, Start
+from .vector import ClothVectorEnv
 
 _DEFAULTS: dict[str, Any] = {
     "resolution": 10,
@@ -214,3 +216,15 @@ class FlyingNapkinTask(ClothTask):
     def success(self, x: torch.Tensor, v: torch.Tensor, control: torch.Tensor) -> torch.Tensor:
         d = torch.linalg.vector_norm(x - self._target.to(x), dim=-1).mean(dim=-1)
         return d < self.success_distance
+
+
+class FlyingNapkinEnv(ClothEnv):
+    task_class = FlyingNapkinTask
+
+
+class FlyingNapkinVectorEnv(ClothVectorEnv):
+    task_class = FlyingNapkinTask
+
+
+# The env's documentation is this module's (Gymnasium's sections, above).
+FlyingNapkinEnv.__doc__ = FlyingNapkinVectorEnv.__doc__ = __doc__

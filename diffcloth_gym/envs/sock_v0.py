@@ -139,7 +139,9 @@ import torch
 
 from ..errors import ConfigError, InputError
 from ._common import halton, merge_config, number, rotation, start_values, vector3
+from .base import ClothEnv
 from .task import ClothTask, Drive, Start
+from .vector import ClothVectorEnv
 
 HOOK_NAMES = ("hook_toe", "hook_sole", "hook_side_pos", "hook_side_neg")
 WEAR_NAMES = ("heel", "toe", "instep", "top_front", "top_back", "top_side_pos", "top_side_neg", "calf")
@@ -393,3 +395,15 @@ class SockTask(ClothTask):
     def success(self, x: torch.Tensor, v: torch.Tensor, control: torch.Tensor) -> torch.Tensor:
         d = self.keypoint_distances(x)[:, len(HOOK_NAMES):]
         return (d < self.success_distance).all(dim=1)
+
+
+class SockEnv(ClothEnv):
+    task_class = SockTask
+
+
+class SockVectorEnv(ClothVectorEnv):
+    task_class = SockTask
+
+
+# The env's documentation is this module's (Gymnasium's sections, above).
+SockEnv.__doc__ = SockVectorEnv.__doc__ = __doc__

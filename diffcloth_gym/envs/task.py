@@ -57,6 +57,12 @@ class ClothTask(abc.ABC):
         """The task's arguments and their defaults (documented in the env's docstring)."""
         return {}
 
+    @classmethod
+    def scene_overrides(cls, config: Mapping[str, Any]) -> dict[str, Any]:
+        """Changes to the scene config that the task's arguments ask for (e.g. a mesh
+        resolution), as ``{table: {key: value}}`` merged into the loaded scene."""
+        return {}
+
     def __init__(self, scene: Mapping[str, Any], rest_positions: np.ndarray, handles: list[int],
                  config: Mapping[str, Any]):
         """``scene``: the loaded scene config (dict); ``rest_positions`` (n, 3) the cloth as the
