@@ -148,8 +148,8 @@ class Batch:
         """Attachment targets in effect of every member, (N, k, 3)."""
     def step_counts(self) -> list[int]:
         """Steps taken since each member's reset."""
-    def tape_lengths(self) -> list[int]:
-        """Recorded steps on each member's tape (0 when not recording)."""
+    def tape_info(self) -> list[tuple[int, int]]:
+        """(recorded steps, bytes held) of each member's tape ((0, 0) when not recording)."""
     def last_steps(self) -> list[dict[str, Any]]:
         """The last step's solver stats of each member."""
     def profile(self, index: int) -> dict[str, Any]:

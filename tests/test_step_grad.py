@@ -130,3 +130,15 @@ def test_step_grad_needs_a_float64_tensor():
         env.step_grad(torch.zeros(env.task.action_dim, dtype=torch.float32))
     # Still usable.
     env.step_grad(torch.zeros(env.task.action_dim, dtype=torch.float64))
+
+
+def test_consecutive_differentiable_episodes_have_separate_graphs():
+    env = gym.make("DiffCloth/FlyingNapkin-v0", resolution=4).unwrapped
+    grads = []
+    for _ in range(2):
+        env.reset(seed=0)
+        a = torch.full((env.task.action_dim,), 0.1, dtype=torch.float64, requires_grad=True)
+        total = sum(env.step_grad(a)[1] for _ in range(3))
+        total.backward()
+        grads.append(a.grad.clone())
+    assert torch.equal(grads[0], grads[1])

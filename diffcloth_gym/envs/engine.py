@@ -98,6 +98,9 @@ class ClothEngine:
 
     def reset(self, indices: list[int], starts: list[Start]) -> np.ndarray:
         """Starts members ``indices`` at ``starts``; returns their observations (len, obs_dim)."""
+        # A new episode starts a new graph: the control state of a step_grad episode is a
+        # graph node and must not be written into.
+        self._control = self._control.detach().clone()
         for i, s in zip(indices, starts):
             self.batch.reset(i, x=s.x, v=s.v)
             self._control[i] = torch.as_tensor(s.control, dtype=torch.float64).reshape(-1, 3)

@@ -183,11 +183,11 @@ impl PyBatch {
         self.inner.members().map(|s| s.step_count()).collect()
     }
 
-    /// Recorded steps on each member's tape (0 when not recording).
-    fn tape_lengths(&self) -> Vec<usize> {
+    /// `(recorded steps, bytes held)` of each member's tape ((0, 0) when not recording).
+    fn tape_info(&self) -> Vec<(usize, usize)> {
         self.inner
             .members()
-            .map(|s| s.tape().map_or(0, |t| t.len()))
+            .map(|s| s.tape().map_or((0, 0), |t| (t.len(), t.bytes())))
             .collect()
     }
 
