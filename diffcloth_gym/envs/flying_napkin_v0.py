@@ -32,8 +32,9 @@ order of the grid, x, y, z per node) as a fraction of `max_force`. The force in 
 `max_force * action`, with `max_force = max_accel * m` where `m` is the mean node mass (total
 mass density x width x height = 0.8 kg, over r^2 nodes): with the default `max_accel` = 20
 units/s^2 that is 0.16 N per node at r = 10 and 1.0 N at r = 4 (gravity on a mean node is
-0.078 N at r = 10). Lumped masses are smaller on the border (a corner node has a quarter to an
-eighth of an interior node's mass), so the same force accelerates border nodes more.
+0.078 N at r = 10). Lumped node masses follow the triangulation (they span a factor 8, the
+lightest at corners; `Simulator.masses` gives them), so the same force accelerates light nodes
+more.
 
 ## Observation Space
 

@@ -266,6 +266,12 @@ class SockTask(ClothTask):
     def default_config(cls) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, list) else v) for k, v in _DEFAULTS.items()}
 
+    @classmethod
+    def scene_overrides(cls, config: Mapping[str, Any] | None) -> dict[str, Any]:
+        """Overrides of the scene config for the task's arguments: none (the scene as shipped)."""
+        merge_config(_DEFAULTS, config, "Sock-v0")
+        return {}
+
     def __init__(self, scene: Mapping[str, Any], rest_positions: np.ndarray, handles: list[int],
                  config: Mapping[str, Any]):
         cfg = merge_config(_DEFAULTS, config, "Sock-v0")
