@@ -103,3 +103,19 @@ def test_settable_properties_are_the_stubbed_setters():
             except AttributeError:
                 pass
     assert settable == setters
+
+
+def test_the_renderer_stub_matches_the_runtime():
+    stub = {n.name: n for n in _stub_class("Renderer").body
+            if isinstance(n, ast.FunctionDef) and not n.name.startswith("_")}
+    runtime = {n for n in dir(_core.Renderer) if not n.startswith("_")}
+    assert set(stub) == runtime
+    for name, fn in stub.items():
+        assert ast.get_docstring(fn), f"Renderer.{name} needs a one-line docstring in the stub"
+        static = inspect.getattr_static(_core.Renderer, name)
+        is_property = "property" in _decorators(fn)
+        assert is_property == isinstance(static, types.GetSetDescriptorType), name
+        if not is_property:
+            assert _stub_params(fn) == _runtime_params(getattr(_core.Renderer, name)), name
+    init = next(n for n in _stub_class("Renderer").body if isinstance(n, ast.FunctionDef) and n.name == "__init__")
+    assert _stub_params(init) == _runtime_params(_core.Renderer), "__init__"

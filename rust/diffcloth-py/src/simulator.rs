@@ -17,7 +17,7 @@ use std::path::Path;
 
 #[pyclass(name = "Simulator", module = "diffcloth_gym._core")]
 pub(crate) struct PySimulator {
-    inner: Simulator,
+    pub(crate) inner: Simulator,
 }
 
 #[pymethods]
