@@ -3,7 +3,8 @@
 Studies: ``accuracy`` (what each accuracy knob costs in time: forward Pareto fronts, the
 backward solver table, gradient error vs forward tolerance, time step), ``stability`` (the
 hard-case suite; ``--full`` for the full size), ``step_time`` (forward ms/step per solver
-setting, and the contact scenes) and ``backward_time`` (adjoint ms/step per solver). Each writes
+setting, and the contact scenes), ``backward_time`` (adjoint ms/step per solver) and ``render``
+(frames/s of the software renderer; ``render --images`` writes docs/images/). Each writes
 ``benchmarks/results/<study>.{json,md}`` (accuracy: ``accuracy_time``); ``<study> --help`` lists
 its options.
 """
@@ -18,6 +19,7 @@ STUDIES = {
     "stability": "benchmarks.stability",
     "step_time": "benchmarks.step_time",
     "backward_time": "benchmarks.backward_time",
+    "render": "benchmarks.render",
 }
 
 

@@ -173,8 +173,13 @@ impl Renderer {
         self.vertex_stage(scene, &view, &cue);
         sky_rows(&self.palette, &mut self.sky, self.height);
         for (row, rgb) in out.chunks_exact_mut(3 * self.width).zip(&self.sky) {
-            for px in row.chunks_exact_mut(3) {
-                px.copy_from_slice(rgb);
+            // One pixel, then the filled part copied onto the rest (memcpy, doubling).
+            row[..3].copy_from_slice(rgb);
+            let mut filled = 3;
+            while filled < row.len() {
+                let n = filled.min(row.len() - filled);
+                row.copy_within(..n, filled);
+                filled += n;
             }
         }
         self.depth.fill(0.0);
