@@ -322,3 +322,155 @@ fn draw(target: &mut Target, view: &View, v: [&Shaded; 3], closed: bool) {
         target.triangle(&[project(&poly[0]), project(&poly[k]), project(&poly[k + 1])]);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use diffcloth::collision::{Motion, Obstacle, Shape};
+
+    /// A view of a scene: the cloth is also its own rest shape.
+    fn scene<'a>(
+        positions: &'a [Vec3],
+        triangles: &'a [[usize; 3]],
+        obstacles: &'a [Obstacle],
+        markers: &'a [Vec3],
+    ) -> SceneView<'a> {
+        SceneView {
+            positions,
+            triangles,
+            rest_positions: positions,
+            obstacles,
+            time: 0.0,
+            markers,
+            up: Vec3::y(),
+        }
+    }
+
+    fn square() -> (Vec<Vec3>, Vec<[usize; 3]>) {
+        let p =
+            [(-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)].map(|(x, z)| Vec3::new(x, 3.0, z));
+        // (At height 3: the floor is at 0, below everything and below the cameras.)
+        // Counter-clockwise seen from above: normals point up.
+        (p.to_vec(), vec![[0, 2, 1], [0, 3, 2]])
+    }
+
+    fn pixel(frame: &[u8], width: usize, x: usize, y: usize) -> [u8; 3] {
+        let i = 3 * (y * width + x);
+        [frame[i], frame[i + 1], frame[i + 2]]
+    }
+
+    fn camera(eye: Vec3) -> Camera {
+        Camera {
+            eye,
+            target: Vec3::new(0.0, 3.0, 0.0),
+            up: Vec3::z(),
+            fov_y: 60.0,
+        }
+    }
+
+    #[test]
+    fn each_side_of_the_cloth_has_its_colour() {
+        let (x, t) = square();
+        let view = scene(&x, &t, &[], &[]);
+        let mut r = Renderer::new(64, 64).unwrap();
+        let above = r
+            .render_to_vec(&view, Some(&camera(Vec3::new(0.0, 6.0, 0.0))))
+            .unwrap();
+        let below = r
+            .render_to_vec(&view, Some(&camera(Vec3::new(0.0, 1.0, 0.0))))
+            .unwrap();
+        let (front, back) = (pixel(&above, 64, 32, 32), pixel(&below, 64, 32, 32));
+        // Red front (red well above green), ochre back (green well above blue).
+        assert!(front[0] as i32 - front[1] as i32 > 60, "{front:?}");
+        assert!(back[1] as i32 - back[2] as i32 > 40, "{back:?}");
+        // The corner of the frame is background.
+        assert_eq!(pixel(&above, 64, 0, 0), pixel(&below, 64, 0, 0));
+    }
+
+    #[test]
+    fn nearer_surfaces_hide_farther_ones_and_markers_show() {
+        let (x, t) = square();
+        let ball = [Obstacle {
+            shape: Shape::Sphere {
+                center: Vec3::new(0.0, 2.0, 0.0),
+                radius: 0.3,
+            },
+            mu: 0.0,
+            motion: Motion::Static,
+        }];
+        let marker = [Vec3::new(0.5, 3.0, 0.5)];
+        let mut r = Renderer::new(64, 64).unwrap();
+        // From above the cloth hides the ball; from below the ball hides the cloth's centre.
+        let above = r
+            .render_to_vec(
+                &scene(&x, &t, &ball, &marker),
+                Some(&camera(Vec3::new(0.0, 6.0, 0.0))),
+            )
+            .unwrap();
+        let bare = r
+            .render_to_vec(
+                &scene(&x, &t, &[], &[]),
+                Some(&camera(Vec3::new(0.0, 6.0, 0.0))),
+            )
+            .unwrap();
+        let (c, b) = (pixel(&above, 64, 32, 32), pixel(&bare, 64, 32, 32));
+        assert!(
+            c[0] as i32 - c[1] as i32 > 60 && b[0] as i32 - b[1] as i32 > 60,
+            "red cloth: {c:?} {b:?}"
+        );
+        let below = r
+            .render_to_vec(
+                &scene(&x, &t, &ball, &[]),
+                Some(&camera(Vec3::new(0.0, 1.0, 0.0))),
+            )
+            .unwrap();
+        let c = pixel(&below, 64, 32, 32);
+        assert!(c[2] > c[0], "slate ball in front of the ochre cloth: {c:?}");
+        assert!(
+            above.chunks_exact(3).any(|p| p == r.palette.marker),
+            "the marker is drawn"
+        );
+    }
+
+    #[test]
+    fn frames_reuse_the_buffers_and_repeat_exactly() {
+        let (x, t) = square();
+        let ball = [Obstacle {
+            shape: Shape::Sphere {
+                center: Vec3::zeros(),
+                radius: 0.3,
+            },
+            mu: 0.0,
+            motion: Motion::Static,
+        }];
+        let view = scene(&x, &t, &ball, &[]);
+        let mut r = Renderer::new(48, 32).unwrap();
+        let mut out = vec![0; 48 * 32 * 3];
+        r.render(&view, None, &mut out).unwrap();
+        let first = out.clone();
+        let buffers = |r: &Renderer| {
+            (
+                r.shaded.as_ptr(),
+                r.surfaces.positions.as_ptr(),
+                r.normals.as_ptr(),
+                r.depth.as_ptr(),
+            )
+        };
+        let before = buffers(&r);
+        r.render(&view, None, &mut out).unwrap();
+        assert_eq!(before, buffers(&r), "no buffer was reallocated");
+        assert_eq!(first, out);
+        assert!(matches!(
+            r.render(&view, None, &mut out[1..]),
+            Err(RenderError::Output { .. })
+        ));
+        assert!(matches!(
+            Renderer::new(0, 5),
+            Err(RenderError::Size { name: "width", .. })
+        ));
+        assert!(matches!(
+            Renderer::new(5, MAX_SIZE + 1),
+            Err(RenderError::Size { name: "height", .. })
+        ));
+    }
+}
