@@ -164,3 +164,19 @@ class Batch:
         max_iterations: int | None = None,
     ) -> dict[str, Any]:
         """One-step adjoint of recorded step `step` on every member: gradients on its inputs (x, v, attachment_targets, external_forces) and warnings."""
+
+class Renderer:
+    """Software renderer (rust/diffcloth-render) of a fixed frame size; holds its buffers across frames."""
+
+    def __init__(self, width: int, height: int) -> None:
+        """A renderer of width x height pixels (each 1..=4096), reused across frames."""
+    @property
+    def width(self) -> int:
+        """Frame width in pixels."""
+    @property
+    def height(self) -> int:
+        """Frame height in pixels."""
+    def render(self, sim: Simulator, camera: dict[str, Any] | None = None) -> npt.NDArray[np.uint8]:
+        """The simulator's current state as an (height, width, 3) uint8 RGB frame."""
+    def default_camera(self, sim: Simulator) -> dict[str, Any]:
+        """The default camera for a simulator's scene: {"eye", "target", "up", "fov"}."""

@@ -276,3 +276,11 @@ class Simulator:
     def write_obj(self, path: str | Path) -> None:
         """Writes the current state as a Wavefront OBJ file."""
         self._core.write_obj(str(path))
+
+    # -- rendering -----------------------------------------------------------------------
+    def render(self, width: int = 480, height: int = 480, camera: Mapping[str, Any] | None = None) -> np.ndarray:
+        """The current state as a (height, width, 3) uint8 RGB frame, drawn by the Rust software
+        renderer (no OpenGL; see :mod:`diffcloth_gym.rendering` for the camera dict)."""
+        from diffcloth_gym.rendering import render_rgb
+
+        return render_rgb(self, width, height, camera)

@@ -20,7 +20,7 @@ def _stub_class(name: str) -> ast.ClassDef:
 
 
 #: The extension's classes whose members are checked against the stub.
-CLASSES = ("Simulator", "Batch")
+CLASSES = ("Simulator", "Batch", "Renderer")
 
 
 def _stub_members(cls: str = "Simulator") -> dict[str, ast.FunctionDef]:
@@ -108,3 +108,9 @@ def test_settable_properties_are_the_stubbed_setters():
             except AttributeError:
                 pass
     assert settable == setters
+
+
+@pytest.mark.parametrize("cls", ("Batch", "Renderer"))
+def test_constructor_signatures_match_the_runtime(cls):
+    init = next(n for n in _stub_class(cls).body if isinstance(n, ast.FunctionDef) and n.name == "__init__")
+    assert _stub_params(init) == _runtime_params(getattr(_core, cls))

@@ -4,7 +4,8 @@
 //! - `simulator`: the `Simulator` class, one method per core call;
 //! - `batch`: the `Batch` class, N simulators on one model stepped in parallel;
 //! - `conv`: numpy arrays and dicts to and from the core's types;
-//! - `errors`: core errors to Python exceptions, and the panic guard.
+//! - `errors`: core errors to Python exceptions, and the panic guard;
+//! - `render`: the `Renderer` class (the software renderer of `diffcloth-render`).
 //!
 //! The Python-side type stub is `diffcloth_gym/_core.pyi` (kept in sync by
 //! `tests/test_core_stub.py`).
@@ -12,6 +13,7 @@
 mod batch;
 mod conv;
 mod errors;
+mod render;
 mod simulator;
 
 use pyo3::prelude::*;
@@ -20,6 +22,7 @@ use pyo3::prelude::*;
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<simulator::PySimulator>()?;
     m.add_class::<batch::PyBatch>()?;
+    m.add_class::<render::PyRenderer>()?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     // The differentiable parameters, from the core's one name table.
     let names: Vec<&str> = diffcloth::Param::ALL
