@@ -178,5 +178,7 @@ class Renderer:
         """Frame height in pixels."""
     def render(self, sim: Simulator, camera: dict[str, Any] | None = None) -> npt.NDArray[np.uint8]:
         """The simulator's current state as an (height, width, 3) uint8 RGB frame."""
+    def render_member(self, batch: Batch, index: int, camera: dict[str, Any] | None = None) -> npt.NDArray[np.uint8]:
+        """Member `index` of a batch as an (height, width, 3) uint8 RGB frame (the envs' frames)."""
     def default_camera(self, sim: Simulator) -> dict[str, Any]:
         """The default camera for a simulator's scene: {"eye", "target", "up", "fov"}."""

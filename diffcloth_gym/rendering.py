@@ -20,7 +20,7 @@ import numpy as np
 from diffcloth_gym import _core
 from diffcloth_gym.errors import InputError
 
-__all__ = ["HumanViewer", "default_camera", "render_rgb"]
+__all__ = ["HumanViewer", "default_camera", "render_member", "render_rgb"]
 
 
 def _renderer(sim, width: int, height: int) -> _core.Renderer:
@@ -45,6 +45,13 @@ def _camera(camera: Mapping[str, Any] | None) -> dict | None:
 def render_rgb(sim, width: int = 480, height: int = 480, camera: Mapping[str, Any] | None = None) -> np.ndarray:
     """The simulator's current state as a (height, width, 3) uint8 RGB frame (a new array)."""
     return _renderer(sim, width, height).render(sim._core, _camera(camera))
+
+
+def render_member(engine, index: int, width: int = 480, height: int = 480,
+                  camera: Mapping[str, Any] | None = None) -> np.ndarray:
+    """Member ``index`` of an env engine's batch (``diffcloth_gym.envs.engine.ClothEngine``) as
+    a (height, width, 3) uint8 RGB frame; the renderer is kept on the engine."""
+    return _renderer(engine, width, height).render_member(engine.batch, index, _camera(camera))
 
 
 def default_camera(sim, width: int = 480, height: int = 480) -> dict:

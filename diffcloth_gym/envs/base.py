@@ -12,19 +12,22 @@ import torch
 
 from diffcloth_gym.envs.engine import ClothEngine
 from diffcloth_gym.envs.task import ClothTask
+from diffcloth_gym.rendering import display_available
 
 
 class ClothEnv(gym.Env):
     """A cloth task as a Gymnasium env. Arguments common to every cloth env:
 
     - ``render_mode``: None, ``"rgb_array"`` (an HxWx3 uint8 frame from a software rasterizer)
-      or ``"human"`` (a matplotlib window).
+      or, where a display exists, ``"human"`` (a matplotlib window).
     - ``solver``: overrides of the scene's ``[solver]`` table (e.g. ``{"tolerance": 1e-9}``);
       plain and recorded steps share one tolerance (default ``engine.DEFAULT_TOLERANCE``).
     - every key of the task's ``default_config()`` (see the env's docstring).
     """
 
-    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 30}
+    # "human" needs a window: advertised only where a display exists (headless checks of
+    # every advertised mode would fail otherwise).
+    metadata = {"render_modes": ["rgb_array"] + (["human"] if display_available() else []), "render_fps": 30}
     task_class: type[ClothTask]
 
     def __init__(self, render_mode: str | None = None, solver: dict | None = None, **task_overrides: Any):
@@ -37,7 +40,7 @@ class ClothEnv(gym.Env):
         bound = self.task.action_bound
         self.action_space = gym.spaces.Box(-bound, bound, (self.task.action_dim,), np.float64)
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, (self.task.obs_dim,), np.float64)
-        self._renderer = None
+        self._viewer = None
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """Starts an episode: ``options={"start": spec}`` sets the start (see the env's
@@ -66,6 +69,9 @@ class ClothEnv(gym.Env):
         return obs[0], reward[0], bool(r.terminated[0]), bool(r.truncated[0]), r.infos[0]
 
     def render(self):
+        """``rgb_array``: the current state as a (480, 480, 3) uint8 frame (software rasterizer,
+        headless; cloth red/ochre by side, obstacles grey, effectors green). ``human``: shows
+        it in a matplotlib window (needs a display)."""
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to gym.make")
             return None
@@ -73,13 +79,13 @@ class ClothEnv(gym.Env):
 
         frame = rendering.render_member(self.engine, 0)
         if self.render_mode == "human":
-            self._renderer = rendering.show(frame, self._renderer)
+            if self._viewer is None:
+                self._viewer = rendering.HumanViewer(type(self).__name__, self.metadata["render_fps"])
+            self._viewer.show(frame)
             return None
         return frame
 
     def close(self):
-        if self._renderer is not None:
-            from diffcloth_gym import rendering
-
-            rendering.close(self._renderer)
-            self._renderer = None
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None

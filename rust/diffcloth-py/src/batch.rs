@@ -13,7 +13,7 @@ use pyo3::types::{PyDict, PyList};
 
 #[pyclass(name = "Batch", module = "diffcloth_gym._core")]
 pub(crate) struct PyBatch {
-    inner: Batch,
+    pub(crate) inner: Batch,
 }
 
 /// Rows of equal length as an (N, rows, 3) float64 array.

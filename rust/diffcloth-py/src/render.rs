@@ -2,8 +2,9 @@
 //! buffers across frames; converts the camera dict and the frame, releases the GIL while
 //! rasterizing. Renderer errors are bad input (`InputError`, naming the argument).
 
+use crate::batch::PyBatch;
 use crate::conv::usize_arg;
-use crate::errors::{guarded, InputError};
+use crate::errors::{guarded, to_py_err, InputError};
 use crate::simulator::PySimulator;
 use diffcloth::Vec3;
 use diffcloth_render::{Camera, Renderer, SceneView};
@@ -66,6 +67,26 @@ fn read_camera(default: Camera, camera: Option<&Bound<'_, PyDict>>) -> PyResult<
     Ok(cam)
 }
 
+impl PyRenderer {
+    /// One frame of `core`'s current state (GIL released while rasterizing).
+    fn frame<'py>(
+        &mut self,
+        py: Python<'py>,
+        core: &diffcloth::Simulator,
+        camera: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Bound<'py, PyArray3<u8>>> {
+        let cam = read_camera(self.inner.framing(&SceneView::of(core)).camera, camera)?;
+        let renderer = &mut self.inner;
+        let frame = guarded(py, || {
+            renderer
+                .render_to_vec(&SceneView::of(core), Some(&cam))
+                .map_err(render_error)
+        })?;
+        let (w, h) = (self.inner.width(), self.inner.height());
+        PyArray1::from_vec(py, frame).reshape([h, w, 3])
+    }
+}
+
 #[pymethods]
 impl PyRenderer {
     /// A renderer of width x height pixels (each 1..=4096), reused across frames.
@@ -95,15 +116,21 @@ impl PyRenderer {
         camera: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Bound<'py, PyArray3<u8>>> {
         let core = &sim.inner;
-        let cam = read_camera(self.inner.framing(&SceneView::of(core)).camera, camera)?;
-        let renderer = &mut self.inner;
-        let frame = guarded(py, || {
-            renderer
-                .render_to_vec(&SceneView::of(core), Some(&cam))
-                .map_err(render_error)
-        })?;
-        let (w, h) = (self.inner.width(), self.inner.height());
-        PyArray1::from_vec(py, frame).reshape([h, w, 3])
+        self.frame(py, core, camera)
+    }
+
+    /// Member `index` of a batch as an (height, width, 3) uint8 RGB frame (the envs' frames).
+    #[pyo3(signature = (batch, index, camera=None))]
+    fn render_member<'py>(
+        &mut self,
+        py: Python<'py>,
+        batch: PyRef<'_, PyBatch>,
+        index: &Bound<'_, PyAny>,
+        camera: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Bound<'py, PyArray3<u8>>> {
+        let index = usize_arg("index", index)?;
+        let core = batch.inner.member(index).map_err(to_py_err)?;
+        self.frame(py, core, camera)
     }
 
     /// The default camera for a simulator's scene: {"eye", "target", "up", "fov"}.
