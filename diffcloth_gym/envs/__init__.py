@@ -14,6 +14,7 @@ import gymnasium as gym
 
 #: Registered ids, their module and class prefix.
 ENVS = {
+    "DiffCloth/Hat-v0": ("hat_v0", "Hat"),
     "DiffCloth/Sock-v0": ("sock_v0", "Sock"),
     "DiffCloth/FlyingNapkin-v0": ("flying_napkin_v0", "FlyingNapkin"),
 }
