@@ -61,7 +61,10 @@ class LinearTanh(torch.nn.Module):
     def __init__(self, obs_dim, act_dim, bound, seed=0):
         super().__init__()
         g = torch.Generator().manual_seed(seed)
-        self.w = torch.nn.Parameter(0.05 * torch.randn(act_dim, obs_dim, generator=g, dtype=torch.float64))
+        # Scaled by 1/sqrt(obs_dim) so tanh is not saturated (a saturated policy has a
+        # vanishing gradient that finite differences cannot resolve).
+        w = torch.randn(act_dim, obs_dim, generator=g, dtype=torch.float64) * 0.05 / obs_dim**0.5
+        self.w = torch.nn.Parameter(w)
         self.b = torch.nn.Parameter(0.1 * torch.randn(act_dim, generator=g, dtype=torch.float64))
         self.bound = bound
 
