@@ -11,6 +11,7 @@ The simulator is projective-dynamics cloth after DiffCloth (Li et al. 2022). Sta
 
 from diffcloth_gym.errors import (
     ConfigError,
+    ContactError,
     ConvergenceWarning,
     DiffClothError,
     DivergedError,
@@ -18,6 +19,7 @@ from diffcloth_gym.errors import (
     InternalError,
     MeshError,
     ParameterError,
+    PenetrationWarning,
     SolverError,
     UnsupportedError,
 )
@@ -27,6 +29,7 @@ from diffcloth_gym.simulator import Simulator
 __all__ = [
     "CONFIG_DIR",
     "ConfigError",
+    "ContactError",
     "ConvergenceWarning",
     "DiffClothError",
     "DivergedError",
@@ -34,6 +37,7 @@ __all__ = [
     "InternalError",
     "MeshError",
     "ParameterError",
+    "PenetrationWarning",
     "Simulator",
     "SolverError",
     "UnsupportedError",
