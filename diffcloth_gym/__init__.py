@@ -11,6 +11,7 @@ The simulator is projective-dynamics cloth after DiffCloth (Li et al. 2022). Sta
 
 from diffcloth_gym.errors import (
     ConfigError,
+    ContactError,
     ConvergenceWarning,
     DiffClothError,
     DivergedError,
@@ -18,6 +19,7 @@ from diffcloth_gym.errors import (
     InternalError,
     MeshError,
     ParameterError,
+    PenetrationWarning,
     SolverError,
     UnsupportedError,
 )
@@ -30,6 +32,7 @@ register_envs()
 __all__ = [
     "CONFIG_DIR",
     "ConfigError",
+    "ContactError",
     "ConvergenceWarning",
     "DiffClothError",
     "DivergedError",
@@ -37,6 +40,7 @@ __all__ = [
     "InternalError",
     "MeshError",
     "ParameterError",
+    "PenetrationWarning",
     "Simulator",
     "SolverError",
     "UnsupportedError",

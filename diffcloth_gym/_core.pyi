@@ -88,6 +88,9 @@ class Simulator:
         """Solver stats of the last step (as returned by step())."""
     def contacts(self) -> dict[str, Any]:
         """The last step's contacts as arrays: node_a, node_b, obstacle, normal, gap, mu, branch, impulse."""
+    def overlap_warning(self) -> str | None:
+        """A message if the state has nodes inside an obstacle or self-contact pairs closer than
+        the radius (the first step throws them out), else None."""
     def obstacle_distance(self, index: int) -> list[float]:
         """Signed distance of every node to obstacle `index` at the current time."""
     def set_obstacle_mu(self, index: int, mu: float) -> None:

@@ -10,7 +10,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from diffcloth_gym import _core
-from diffcloth_gym.errors import ConfigError, ConvergenceWarning, InputError
+from diffcloth_gym.errors import ConfigError, ConvergenceWarning, InputError, PenetrationWarning
 from diffcloth_gym.scenes import load_config
 
 
@@ -42,6 +42,7 @@ class Simulator:
         # Bumped by everything that changes the tape (reset, step, set_recording), so a
         # holder of a recorded rollout (diffcloth_gym.torch) can tell it is still the same.
         self._tape_version = 0
+        self._warn_overlaps(stacklevel=4)
 
     @classmethod
     def from_config(cls, config: str | Path | Mapping[str, Any]) -> "Simulator":
@@ -57,10 +58,21 @@ class Simulator:
     # -- state ---------------------------------------------------------------------------
     def reset(self, x: Any = None, v: Any = None) -> None:
         """Sets positions ``x`` (default: rest shape) and velocities ``v`` (default: zero),
-        time to 0 and attachment targets to the attached nodes' positions."""
+        time to 0 and attachment targets to the attached nodes' positions. Positions inside an
+        obstacle, or self-contact pairs closer than the radius, raise a
+        :class:`~diffcloth_gym.errors.PenetrationWarning` (with the depth): the first step
+        throws them out."""
         n = self.num_nodes
         self._tape_version += 1
         self._core.reset(None if x is None else _nodes("x", x, n), None if v is None else _nodes("v", v, n))
+        self._warn_overlaps(stacklevel=3)
+
+    def _warn_overlaps(self, stacklevel: int) -> None:
+        """A :class:`PenetrationWarning` if the state starts inside an obstacle or with
+        self-contact pairs closer than the radius: the first step would throw them out."""
+        message = self._core.overlap_warning()
+        if message:
+            warnings.warn(message, PenetrationWarning, stacklevel=stacklevel)
 
     def step(self, attachment_targets: Any = None, external_forces: Any = None, steps: int = 1) -> dict:
         """Advances ``steps`` implicit-Euler steps (default 1).

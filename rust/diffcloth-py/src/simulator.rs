@@ -241,6 +241,12 @@ impl PySimulator {
         contacts_dict(py, self.inner.contacts())
     }
 
+    /// A message if the current state has nodes inside an obstacle or self-contact pairs
+    /// closer than the radius (the first step throws them out), else None.
+    fn overlap_warning(&self) -> Option<String> {
+        self.inner.overlap_warning()
+    }
+
     /// Signed distance of every node to obstacle `index` at the current time, shape (n,).
     fn obstacle_distance(&self, index: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
         let index = usize_arg("index", index)?;

@@ -26,6 +26,10 @@ pub enum Error {
     /// A feature that is not available for this input yet (the message says which).
     #[error("not supported: {0}")]
     Unsupported(String),
+    /// Contact could not be resolved (a node keeps crossing an obstacle); the step was
+    /// rolled back.
+    #[error("contact failed: {0}")]
+    Contact(String),
     /// The state became non-finite; the step was rolled back.
     #[error("simulation diverged: {0}")]
     Diverged(String),

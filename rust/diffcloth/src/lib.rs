@@ -31,7 +31,7 @@ pub use batch::{Batch, MemberInput};
 pub use config::{BendModel, Effect, SceneConfig};
 pub use contact::{Branch, BranchCounts, Contact, ContactKind};
 pub use error::{Error, Result};
-pub use forward::{Model, Simulator, StepInput, StepStats};
+pub use forward::{Model, Overlaps, Simulator, StepInput, StepStats};
 pub use params::{Acceleration, Param, ParamValue, Params, SolverSettings};
 pub use profile::Profile;
 

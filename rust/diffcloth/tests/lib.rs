@@ -6,6 +6,8 @@ mod contact;
 mod contact_response;
 mod forward_physics;
 mod gradients;
+mod issue_11_folded_cloth_energy;
+mod issue_11_obstacle_tunnelling;
 mod model_sharing;
 mod pd_solver;
 mod scenes;

@@ -22,12 +22,14 @@ use std::sync::Arc;
 mod detection;
 mod diagnostics;
 mod model;
+mod overlap;
 mod pd;
 mod safeguards;
 mod state;
 mod step;
 
 pub use model::Model;
+pub use overlap::Overlaps;
 
 /// What one forward step did.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
