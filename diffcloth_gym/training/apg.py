@@ -26,6 +26,7 @@ Checkpoints (policy, Adam, epoch, counts, clock, RNG states, curve) are written 
 from __future__ import annotations
 
 import math
+import time
 import warnings
 from pathlib import Path
 from typing import Any, Mapping
@@ -69,6 +70,7 @@ class APGTrainer:
         self.clip_count = 0
         self.eval_starts = list(test_starts(c["env_id"]) if eval_starts is None else eval_starts)
         self._eval_env = None
+        self.last_eval: list[dict] = []
         self.eval_steps = 0
         self.train_log = self.eval_log = None
         if self.run_dir is not None:
@@ -84,7 +86,7 @@ class APGTrainer:
                 "policy": self.policy.state_dict(), "policy_config": self.policy.config(),
                 "optimizer": self.optimizer.state_dict(), "counts": self.counter.snapshot(),
                 "eval_steps": self.eval_steps, "clock": self.clock.state(), "curve": self.curve,
-                "clip_count": self.clip_count, "rng": rng_states()}
+                "last_eval": self.last_eval, "clip_count": self.clip_count, "rng": rng_states()}
 
     def _resume(self) -> None:
         ck = load_checkpoint(self.run_dir / "checkpoint.pt")
@@ -96,6 +98,7 @@ class APGTrainer:
         self.policy.load_state_dict(ck["policy"])
         self.optimizer.load_state_dict(ck["optimizer"])
         self.epoch, self.curve, self.clip_count = ck["epoch"], ck["curve"], ck["clip_count"]
+        self.last_eval = ck["last_eval"]
         self.counter.restore(ck["counts"])
         self.eval_steps = ck["eval_steps"]
         self.clock.train_s, self.clock.eval_s = ck["clock"]["train_s"], ck["clock"]["eval_s"]
@@ -200,26 +203,30 @@ class APGTrainer:
                  "backward_steps": self.counter.backward, "train_s": self.clock.train_s,
                  "test_loss": ev.mean_loss, "success_rate": ev.success_rate}
         self.curve.append(point)
+        self.last_eval = ev.per_start()
         if self.eval_log is not None:
             self.eval_log.write(point)
 
-    def train(self, epochs: int | None = None) -> dict[str, Any]:
+    def train(self, epochs: int | None = None, deadline: float | None = None) -> dict[str, Any]:
         """Trains up to ``epochs`` in total (default the config's), evaluating every
-        ``eval_every`` epochs and at the end; returns the run's summary."""
+        ``eval_every`` epochs and at the end; stops early (after a checkpoint, resumable) once
+        ``time.time()`` passes ``deadline``. Returns the run's summary."""
         epochs = int(self.cfg["epochs"] if epochs is None else epochs)
+        self.target_epochs = epochs
         every = int(self.cfg["eval_every"])
         if not self.curve:
             self._eval_point()
             self.save()
         bar = tqdm(total=epochs, initial=self.epoch, desc=f"apg seed {self.seed}", disable=not self.progress,
                    unit="epoch")
-        while self.epoch < epochs:
+        while self.epoch < epochs and (deadline is None or time.time() < deadline):
             self.clock.start()
             row = self.run_epoch()
             row["epoch_s"] = self.clock.stop("train")
             if self.train_log is not None:
                 self.train_log.write(row)
-            if (every and self.epoch % every == 0) or self.epoch == epochs:
+            out_of_time = deadline is not None and time.time() >= deadline
+            if (every and self.epoch % every == 0) or self.epoch == epochs or out_of_time:
                 self._eval_point()
             self.save()
             bar.update(1)
@@ -230,7 +237,10 @@ class APGTrainer:
 
     def summary(self) -> dict[str, Any]:
         last = self.curve[-1] if self.curve else {}
-        return {"method": "apg", "seed": self.seed, "epochs": self.epoch, "final_test_loss": last.get("test_loss"),
+        target = getattr(self, "target_epochs", int(self.cfg["epochs"]))
+        return {"method": "apg", "seed": self.seed, "epochs": self.epoch, "budget_epochs": target,
+                "complete": self.epoch >= target, "final_test_loss": last.get("test_loss"),
+                "final_eval_epoch": last.get("epoch"), "per_start": self.last_eval,
                 "success_rate": last.get("success_rate"), "curve": self.curve, **self.counter.snapshot(),
                 "paper_steps": paper_count("apg", self.epoch, self.task.horizon, self.counter.forward),
                 "eval_steps": self.eval_steps, "clipped_epochs": self.clip_count, **self.clock.state(),

@@ -19,6 +19,7 @@ Logs: SB3's own (``sb3/progress.csv``; TensorBoard too when ``tensorboard`` is i
 from __future__ import annotations
 
 import io
+import time
 import warnings
 from pathlib import Path
 from typing import Any, Mapping
@@ -82,6 +83,7 @@ class PPOTrainer:
         self.eval_steps = 0
         self.eval_starts = list(test_starts(c["env_id"]) if eval_starts is None else eval_starts)
         self._eval_env = None
+        self.last_eval: list[dict] = []
         ck = load_checkpoint(self.run_dir / "checkpoint.pt") if (self.run_dir and resume) else None
         if ck is None:
             self.adapter.seed(seed)
@@ -117,7 +119,8 @@ class PPOTrainer:
         return {"method": "ppo", "cfg": self.cfg, "seed": self.seed, "model": buf.getvalue(),
                 "num_timesteps": self.model.num_timesteps, "members": members,
                 "adapter_rngs": self.adapter._rngs, "counts": self.counter.snapshot(),
-                "eval_steps": self.eval_steps, "clock": self.clock.state(), "curve": self.curve, "rng": rng_states()}
+                "eval_steps": self.eval_steps, "clock": self.clock.state(), "curve": self.curve,
+                "last_eval": self.last_eval, "rng": rng_states()}
 
     def _restore(self, ck: dict) -> None:
         m = ck["members"]
@@ -128,7 +131,7 @@ class PPOTrainer:
         self.adapter._rngs = ck["adapter_rngs"]
         self.model._last_obs = obs.astype(np.float64)
         self.counter.restore(ck["counts"])
-        self.eval_steps, self.curve = ck["eval_steps"], ck["curve"]
+        self.eval_steps, self.curve, self.last_eval = ck["eval_steps"], ck["curve"], ck["last_eval"]
         self.clock.train_s, self.clock.eval_s = ck["clock"]["train_s"], ck["clock"]["eval_s"]
         set_rng_states(ck["rng"])
 
@@ -153,19 +156,22 @@ class PPOTrainer:
                  "backward_steps": 0, "train_s": self.clock.train_s, "test_loss": ev.mean_loss,
                  "success_rate": ev.success_rate}
         self.curve.append(point)
+        self.last_eval = ev.per_start()
         if self.eval_log is not None:
             self.eval_log.write(point)
 
-    def train(self, timesteps: int | None = None) -> dict[str, Any]:
-        """Trains up to ``timesteps`` in total (default the config's), whole rollouts."""
+    def train(self, timesteps: int | None = None, deadline: float | None = None) -> dict[str, Any]:
+        """Trains up to ``timesteps`` in total (default the config's), whole rollouts; stops
+        early (after a checkpoint, resumable) once ``time.time()`` passes ``deadline``."""
         total = int(self.cfg["timesteps"] if timesteps is None else timesteps)
+        self.target_timesteps = total
         chunk = max(1, -(-int(self.cfg["eval_every"]) // self.rollout)) * self.rollout
         if not self.curve:
             self._eval_point()
             self.save()
         bar = tqdm(total=total, initial=self.model.num_timesteps, desc=f"ppo seed {self.seed}",
                    disable=not self.progress, unit="step")
-        while self.model.num_timesteps < total:
+        while self.model.num_timesteps < total and (deadline is None or time.time() < deadline):
             todo = min(chunk, -(-(total - self.model.num_timesteps) // self.rollout) * self.rollout)
             self.clock.start()
             self.model.learn(todo, reset_num_timesteps=False, callback=_callback(bar))
@@ -178,7 +184,10 @@ class PPOTrainer:
 
     def summary(self) -> dict[str, Any]:
         last = self.curve[-1] if self.curve else {}
-        return {"method": "ppo", "seed": self.seed, "final_test_loss": last.get("test_loss"),
+        target = getattr(self, "target_timesteps", int(self.cfg["timesteps"]))
+        return {"method": "ppo", "seed": self.seed, "budget_timesteps": target,
+                "complete": self.model.num_timesteps >= target, "final_test_loss": last.get("test_loss"),
+                "per_start": self.last_eval,
                 "success_rate": last.get("success_rate"), "curve": self.curve, **self.counter.snapshot(),
                 "num_timesteps": self.model.num_timesteps,
                 "paper_steps": paper_count("ppo", None, self.task.horizon, self.counter.forward),
