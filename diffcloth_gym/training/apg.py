@@ -47,6 +47,11 @@ def epoch_seed(run_seed: int, epoch: int, batch: int) -> int:
     return 1_000_003 * run_seed + epoch * batch
 
 
+def _fixed(cfg: Mapping[str, Any]) -> dict:
+    """The settings a run cannot change when resumed (its length may grow)."""
+    return {k: v for k, v in cfg.items() if k != "epochs"}
+
+
 class APGTrainer:
     """One APG run in ``run_dir`` (resumed from its checkpoint when there is one)."""
 
@@ -92,7 +97,7 @@ class APGTrainer:
         ck = load_checkpoint(self.run_dir / "checkpoint.pt")
         if ck is None:
             return
-        if ck["cfg"] != self.cfg or ck["seed"] != self.seed:
+        if _fixed(ck["cfg"]) != _fixed(self.cfg) or ck["seed"] != self.seed:
             raise ValueError(f"{self.run_dir}: its checkpoint was made with another config or seed; "
                              "use another run folder or resume=False")
         self.policy.load_state_dict(ck["policy"])

@@ -151,8 +151,8 @@ def plot(results: Mapping[str, Any], path: Path) -> None:
     if results.get("target_loss_1.1x_apg"):
         for ax in axes:
             ax.axhline(results["target_loss_1.1x_apg"], color="gray", ls="--", lw=1, label="1.1 x APG final")
-    axes[0].set_xlabel("simulated time steps (counted; APG: forward, backward not included)")
-    axes[1].set_xlabel("training wall-clock seconds")
+    axes[0].set_xlabel("simulated time steps, counted (APG: forward only; 0 drawn at 1)")
+    axes[1].set_xlabel("training wall-clock seconds (0 drawn at 1)")
     for ax in axes:
         ax.set_xscale("log")
         ax.set_ylabel(f"test loss (mean over {len(results['test_starts'])} test starts)")

@@ -46,6 +46,11 @@ def _callback(bar):
     return _Progress()
 
 
+def _fixed(cfg: Mapping[str, Any]) -> dict:
+    """The settings a run cannot change when resumed (its length may grow)."""
+    return {k: v for k, v in cfg.items() if k != "timesteps"}
+
+
 class PPOTrainer:
     """One PPO run in ``run_dir`` (resumed from its checkpoint when there is one)."""
 
@@ -89,7 +94,7 @@ class PPOTrainer:
             self.adapter.seed(seed)
             self.model = PPO("MlpPolicy", self.venv, **kwargs)
         else:
-            if ck["cfg"] != self.cfg or ck["seed"] != seed:
+            if _fixed(ck["cfg"]) != _fixed(self.cfg) or ck["seed"] != seed:
                 raise ValueError(f"{self.run_dir}: its checkpoint was made with another config or seed; "
                                  "use another run folder or resume=False")
             self.model = PPO.load(io.BytesIO(ck["model"]), env=self.venv, device="cpu")
