@@ -99,3 +99,26 @@ def test_ppo_runs_end_to_end_counts_its_steps_and_resumes_bitwise(tmp_path):
     assert r["forward"] == s["forward"]
     for p, q in zip(full.model.policy.parameters(), resumed.model.policy.parameters()):
         assert torch.equal(p, q)
+
+
+def test_compare_writes_results_and_marks_a_stopped_run_partial(tmp_path):
+    import json
+
+    from diffcloth_gym.training import compare
+
+    budget = {"name": "tiny", **NAPKIN, "seeds": [0], "methods": ["apg", "ppo"], "eval_stride": 10,
+              "gif_starts_stride": 10, "gif_frame_every": 50,
+              "apg": {"epochs": 1, "batch": 2, "eval_every": 1},
+              "ppo": {"num_envs": 2, "n_steps": HORIZON, "batch_size": 100, "n_epochs": 1, "timesteps": 200,
+                      "eval_every": 200}}
+    r = compare.run(budget, out=tmp_path, progress=False, command="pytest")
+    for ext in ("json", "md", "png", "gif"):
+        assert (tmp_path / f"hat_controller.{ext}").stat().st_size > 0
+    data = json.loads((tmp_path / "hat_controller.json").read_text())
+    assert not data["partial"] and len(data["test_starts"]) == 2
+    assert [s["forward"] for s in data["runs"]] == [2 * HORIZON, 200]
+    assert data["runs"][0]["reach_1.1x_apg"] is not None  # APG reaches its own final loss
+    # A deadline already passed: nothing trains, the longer budget is partial, and says so.
+    longer = {**budget, "apg": {**budget["apg"], "epochs": 3}}
+    r = compare.run(longer, out=tmp_path, progress=False, max_minutes=0, gif=False, command="pytest")
+    assert r["partial"] and "PARTIAL" in (tmp_path / "hat_controller.md").read_text()
