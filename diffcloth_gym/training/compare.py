@@ -123,7 +123,9 @@ def summarize(budget: Mapping[str, Any], budget_name: str, summaries: list[dict]
     ratio = None
     if "apg" in per_method and "ppo" in per_method:
         a, p = per_method["apg"]["steps_to_1.1x_apg_mean"], per_method["ppo"]["steps_to_1.1x_apg_mean"]
-        ratio = p / a if a and p else None
+        # None when a method missed the target or APG met it at step 0 (the initial policy
+        # already within 1.1x: the budget is too short for the ratio to mean anything).
+        ratio = p / a if a is not None and p is not None and a > 0 else None
     return {"env_id": budget["env_id"], "budget": budget_name, "budget_config": budget,
             "test_starts": eval_starts(budget), "seeds": seeds, "methods": methods,
             "target_loss_1.1x_apg": target, "per_method": per_method, "ppo_over_apg_steps_to_target": ratio,
@@ -190,7 +192,10 @@ def markdown(results: Mapping[str, Any], name: str) -> str:
                      f"{'not reached' if reach is None else format(reach['steps'], ',')} | "
                      f"{s['train_s']:.0f} | {s['eval_s']:.0f} |")
     ratio = r["ppo_over_apg_steps_to_target"]
-    lines += ["", f"PPO / APG time steps to the target loss: {_f(ratio, '{:.1f}x') if ratio else 'n/a (a method did not reach it)'} "
+    why = ("n/a (the initial policies are already within 1.1x of APG's final loss: budget too short)"
+           if any(s["reach_1.1x_apg"] and s["reach_1.1x_apg"]["steps"] == 0 for s in r["runs"])
+           else "n/a (a method did not reach it)")
+    lines += ["", f"PPO / APG time steps to the target loss: {_f(ratio, '{:.1f}x') if ratio else why} "
               f"(paper: 85x, Adam 23,200 vs PPO 1,978,000).", "",
               "Counting: time steps are every step the simulator completed in training, read from the "
               "engine's per-member step counters (evaluation apart). APG's backward pass is a one-step "
