@@ -115,6 +115,25 @@ class ClothEngine:
         with torch.no_grad():
             return self.task.observe(x[idx], v[idx], self._control[idx]).numpy()
 
+    def detach_graph(self) -> None:
+        """Cuts the differentiable episode's graph here: later steps still differentiate, but no
+        gradient flows back past this point (truncated backpropagation over windows)."""
+        self._x_t, self._v_t, self._control = self._x_t.detach(), self._v_t.detach(), self._control.detach()
+
+    def snapshot(self) -> dict[str, np.ndarray]:
+        """Every member's state, control and episode step (for checkpoints; see ``restore``)."""
+        return {"x": self.batch.positions(), "v": self.batch.velocities(),
+                "control": self._control.detach().numpy().copy(), "steps": self._steps.copy()}
+
+    def restore(self, snapshot: Mapping[str, np.ndarray]) -> np.ndarray:
+        """Puts every member back to a ``snapshot()`` (mid-episode included) for plain steps;
+        returns the observations."""
+        n = self.num_envs
+        obs = self.reset(list(range(n)), [Start(x=snapshot["x"][i], v=snapshot["v"][i],
+                                                control=snapshot["control"][i]) for i in range(n)])
+        self._steps[:] = snapshot["steps"]
+        return obs
+
     def _claim(self, mode: str) -> None:
         if not self._started.all():
             raise InputError("call reset() before stepping")

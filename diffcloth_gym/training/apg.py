@@ -173,11 +173,9 @@ class APGTrainer:
                 **self.counter.snapshot()}
 
     def _cut_graph(self, obs: torch.Tensor) -> torch.Tensor:
-        """Detaches the rollout's state between windows. The env API has no call for this, so
-        it detaches the engine's graph-carrying state (positions, velocities, effector control)
-        itself; the next step's record starts from the same values without history."""
-        e = self.engine
-        e._x_t, e._v_t, e._control = e._x_t.detach(), e._v_t.detach(), e._control.detach()
+        """Detaches the rollout's state between windows (the engine's graph and the
+        observation); the next step's record starts from the same values without history."""
+        self.engine.detach_graph()
         return obs.detach()
 
     def _grad_stats(self, deltas, n: int) -> dict[str, float]:

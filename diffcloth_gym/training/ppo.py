@@ -28,7 +28,6 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from diffcloth_gym.envs.task import Start
 from diffcloth_gym.training.accounting import Clock, count_steps, paper_count, threads
 from diffcloth_gym.training.config import load, merged
 from diffcloth_gym.training.evaluate import evaluate, make_eval_env, test_starts
@@ -119,8 +118,7 @@ class PPOTrainer:
         buf = io.BytesIO()
         self.model.save(buf)
         e = self.engine
-        members = {"x": e.batch.positions().copy(), "v": e.batch.velocities().copy(),
-                   "control": e._control.detach().numpy().copy(), "steps": e._steps.copy()}
+        members = e.snapshot()
         return {"method": "ppo", "cfg": self.cfg, "seed": self.seed, "model": buf.getvalue(),
                 "num_timesteps": self.model.num_timesteps, "members": members,
                 "adapter_rngs": self.adapter._rngs, "counts": self.counter.snapshot(),
@@ -128,11 +126,7 @@ class PPOTrainer:
                 "last_eval": self.last_eval, "rng": rng_states()}
 
     def _restore(self, ck: dict) -> None:
-        m = ck["members"]
-        n = self.adapter.num_envs
-        starts = [Start(x=m["x"][i], v=m["v"][i], control=m["control"][i]) for i in range(n)]
-        obs = self.engine.reset(list(range(n)), starts)
-        self.engine._steps[:] = m["steps"]  # the episodes' step indices (0 at a rollout boundary)
+        obs = self.engine.restore(ck["members"])
         self.adapter._rngs = ck["adapter_rngs"]
         self.model._last_obs = obs.astype(np.float64)
         self.counter.restore(ck["counts"])
