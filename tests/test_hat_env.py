@@ -4,11 +4,10 @@ through ``step_grad`` matches central finite differences."""
 
 import gymnasium as gym
 import numpy as np
-import torch
 
 import diffcloth_gym  # noqa: F401
 from diffcloth_gym.envs.hat_v0 import TEST_STARTS, head_sphere
-from tests.test_step_grad import TIGHT, LinearTanh, check_fd, closed_loop_return, plain_return
+from tests.test_step_grad import TIGHT, LinearTanh, check_policy_gradient
 
 #: The contact layer's thickness (the core's default, `contact.thickness`).
 THICKNESS = 0.01
@@ -34,15 +33,4 @@ def test_a_random_policy_from_every_test_start_stays_finite_and_out_of_the_head(
 
 def test_hat_policy_gradient_through_step_grad_matches_finite_differences():
     env = gym.make("DiffCloth/Hat-v0", solver=TIGHT).unwrapped
-    policy = LinearTanh(env.task.obs_dim, env.task.action_dim, 0.5, seed=1)
-    steps = 20
-    total = closed_loop_return(env, policy, seed=0, steps=steps)
-    total.backward()
-    grad = torch.cat([policy.w.grad.ravel(), policy.b.grad]).numpy()
-    theta = policy.flat()
-
-    def loss_at(t):
-        policy.set_flat(t)
-        return plain_return(env, policy, seed=0, steps=steps)
-
-    check_fd(loss_at, theta, grad, eps=1e-5, tol=1e-5)
+    check_policy_gradient(env, LinearTanh(env.task.obs_dim, env.task.action_dim, 0.5, seed=1))
