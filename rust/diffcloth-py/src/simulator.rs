@@ -7,13 +7,14 @@ use crate::conv::{
 };
 use crate::errors::{guarded, InputError, ParameterError};
 use diffcloth::{
-    Acceleration, AdjointSolver, BackwardOptions, Param, ParamValue, Params, SceneConfig,
+    Acceleration, AdjointSolver, BackwardOptions, Cancel, Param, ParamValue, Params, SceneConfig,
     Simulator, SolverSettings, StepInput, StepStats, Vec3,
 };
 use numpy::{PyArray2, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::Path;
+use std::sync::Mutex;
 
 #[pyclass(name = "Simulator", module = "diffcloth_gym._core")]
 pub(crate) struct PySimulator {
@@ -345,8 +346,24 @@ impl PySimulator {
             tolerance: tolerance.unwrap_or(defaults.tolerance),
             max_iterations: max_iterations.unwrap_or(defaults.max_iterations),
         };
-        let g = guarded(py, || sim.backward(&gx, &gv, &options))?;
-        gradients_dict(py, &g)
+        // Ctrl-C: the core polls this check (at most every 50 ms, between and inside adjoint
+        // solves); it takes the GIL back for a moment and keeps the signal handler's exception
+        // (KeyboardInterrupt, or whatever a custom handler raised) to re-raise as it was.
+        let interrupt: Mutex<Option<PyErr>> = Mutex::new(None);
+        let check = || match Python::attach(|py| py.check_signals()) {
+            Ok(()) => false,
+            Err(e) => {
+                *interrupt.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
+                true
+            }
+        };
+        let result = guarded(py, || {
+            sim.backward_cancellable(&gx, &gv, &options, &Cancel::new(&check))
+        });
+        if let Some(e) = interrupt.into_inner().unwrap_or_else(|p| p.into_inner()) {
+            return Err(e);
+        }
+        gradients_dict(py, &result?)
     }
 
     /// Records (on) or stops recording (off) the PD convergence trace of each step.

@@ -6,6 +6,7 @@
 
 pub mod anderson;
 pub mod backward;
+pub mod cancel;
 pub mod collision;
 pub mod config;
 pub mod contact;
@@ -26,6 +27,7 @@ pub mod tape;
 pub type Vec3 = nalgebra::Vector3<f64>;
 
 pub use backward::{AdjointSolver, BackwardOptions, Gradients};
+pub use cancel::Cancel;
 pub use config::{BendModel, Effect, SceneConfig};
 pub use contact::{Branch, BranchCounts, Contact, ContactKind};
 pub use error::{Error, Result};

@@ -5,6 +5,7 @@ mod contact;
 mod contact_response;
 mod forward_physics;
 mod gradients;
+mod issue_11_cancel_backward;
 mod model_sharing;
 mod pd_solver;
 mod scenes;
