@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import warnings
 from pathlib import Path
 from typing import Any, Mapping
@@ -52,6 +53,8 @@ class Simulator:
             text = json.dumps(cfg)
         except (TypeError, ValueError) as e:
             raise ConfigError(f"config is not serializable: {e}") from None
+        except RecursionError:
+            raise ConfigError("config is nested too deeply (or contains itself)") from None
         return cls(_core.Simulator.from_json(text, str(base)), cfg)
 
     # -- state ---------------------------------------------------------------------------
@@ -275,4 +278,7 @@ class Simulator:
 
     def write_obj(self, path: str | Path) -> None:
         """Writes the current state as a Wavefront OBJ file."""
-        self._core.write_obj(str(path))
+        # str(None) would be the file name "None": only real paths are accepted.
+        if not isinstance(path, (str, os.PathLike)) or not os.fspath(path):
+            raise InputError(f"path must be a file path (str or os.PathLike), got {path!r}")
+        self._core.write_obj(os.fspath(path))

@@ -6,6 +6,7 @@ mod contact_response;
 mod forward_physics;
 mod gradients;
 mod issue_11_cancel_backward;
+mod issue_11_malformed_inputs;
 mod model_sharing;
 mod pd_solver;
 mod scenes;
