@@ -28,6 +28,17 @@ def _nodes(name: str, value: Any, rows: int | None = None) -> np.ndarray:
     return a
 
 
+def _real(name: str, value: Any) -> float:
+    """A real-number argument as a float; anything else (a string, None, an int too large for a
+    float) is an InputError naming ``name``, not Python's TypeError/ValueError/OverflowError."""
+    if not isinstance(value, (str, bytes)):
+        try:
+            return float(value)
+        except (TypeError, ValueError, OverflowError):
+            pass
+    raise InputError(f"{name} must be a real number, got {value!r}")
+
+
 class Simulator:
     """A cloth scene simulated forward in time (projective dynamics, implicit Euler).
 
@@ -129,7 +140,7 @@ class Simulator:
 
     @time.setter
     def time(self, t: float) -> None:
-        self._core.time = float(t)
+        self._core.time = _real("time", t)
 
     @property
     def attachment_nodes(self) -> list[int]:
@@ -216,8 +227,8 @@ class Simulator:
                 raise InputError(f"{name} must have shape ({steps}, {self.num_nodes}, 3), got {arr.shape}")
             return arr
         out = self._core.backward(grads("dl_dx", dl_dx), grads("dl_dv", dl_dv), solver,
-                                  None if tolerance is None else float(tolerance),
-                                  None if max_iterations is None else int(max_iterations))
+                                  None if tolerance is None else _real("tolerance", tolerance),
+                                  max_iterations)
         out["attachment_targets"] = [np.asarray(a) for a in out["attachment_targets"]]
         out["external_forces"] = [np.asarray(a) for a in out["external_forces"]]
         # A force held constant over the rollout: the sum of the per-step gradients.
@@ -227,11 +238,13 @@ class Simulator:
 
     def set_obstacle_mu(self, index: int, mu: float) -> None:
         """Sets the Coulomb friction coefficient of obstacle ``index``."""
-        self._core.set_obstacle_mu(int(index), float(mu))
+        # The binding checks both and names the one that is wrong (int() and float() here
+        # raised TypeError/ValueError, and int(1.5) silently picked obstacle 1).
+        self._core.set_obstacle_mu(index, mu)
 
     def set_self_mu(self, mu: float) -> None:
         """Sets the self-contact friction coefficient."""
-        self._core.set_self_mu(float(mu))
+        self._core.set_self_mu(mu)
 
     # -- diagnostics ---------------------------------------------------------------------
     def profile(self) -> dict:
