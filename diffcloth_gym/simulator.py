@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import warnings
 from pathlib import Path
 from typing import Any, Mapping
@@ -25,6 +26,17 @@ def _nodes(name: str, value: Any, rows: int | None = None) -> np.ndarray:
     if rows is not None and a.shape[0] != rows:
         raise InputError(f"{name} must have {rows} rows, got {a.shape[0]}")
     return a
+
+
+def _real(name: str, value: Any) -> float:
+    """A real-number argument as a float; anything else (a string, None, an int too large for a
+    float) is an InputError naming ``name``, not Python's TypeError/ValueError/OverflowError."""
+    if not isinstance(value, (str, bytes)):
+        try:
+            return float(value)
+        except (TypeError, ValueError, OverflowError):
+            pass
+    raise InputError(f"{name} must be a real number, got {value!r}")
 
 
 class Simulator:
@@ -53,6 +65,8 @@ class Simulator:
             text = json.dumps(cfg)
         except (TypeError, ValueError) as e:
             raise ConfigError(f"config is not serializable: {e}") from None
+        except RecursionError:
+            raise ConfigError("config is nested too deeply (or contains itself)") from None
         return cls(_core.Simulator.from_json(text, str(base)), cfg)
 
     # -- state ---------------------------------------------------------------------------
@@ -138,7 +152,7 @@ class Simulator:
 
     @time.setter
     def time(self, t: float) -> None:
-        self._core.time = float(t)
+        self._core.time = _real("time", t)
 
     @property
     def attachment_nodes(self) -> list[int]:
@@ -225,8 +239,8 @@ class Simulator:
                 raise InputError(f"{name} must have shape ({steps}, {self.num_nodes}, 3), got {arr.shape}")
             return arr
         out = self._core.backward(grads("dl_dx", dl_dx), grads("dl_dv", dl_dv), solver,
-                                  None if tolerance is None else float(tolerance),
-                                  None if max_iterations is None else int(max_iterations))
+                                  None if tolerance is None else _real("tolerance", tolerance),
+                                  max_iterations)
         out["attachment_targets"] = [np.asarray(a) for a in out["attachment_targets"]]
         out["external_forces"] = [np.asarray(a) for a in out["external_forces"]]
         # A force held constant over the rollout: the sum of the per-step gradients.
@@ -236,11 +250,13 @@ class Simulator:
 
     def set_obstacle_mu(self, index: int, mu: float) -> None:
         """Sets the Coulomb friction coefficient of obstacle ``index``."""
-        self._core.set_obstacle_mu(int(index), float(mu))
+        # The binding checks both and names the one that is wrong (int() and float() here
+        # raised TypeError/ValueError, and int(1.5) silently picked obstacle 1).
+        self._core.set_obstacle_mu(index, mu)
 
     def set_self_mu(self, mu: float) -> None:
         """Sets the self-contact friction coefficient."""
-        self._core.set_self_mu(float(mu))
+        self._core.set_self_mu(mu)
 
     # -- diagnostics ---------------------------------------------------------------------
     def profile(self) -> dict:
@@ -287,7 +303,10 @@ class Simulator:
 
     def write_obj(self, path: str | Path) -> None:
         """Writes the current state as a Wavefront OBJ file."""
-        self._core.write_obj(str(path))
+        # str(None) would be the file name "None": only real paths are accepted.
+        if not isinstance(path, (str, os.PathLike)) or not os.fspath(path):
+            raise InputError(f"path must be a file path (str or os.PathLike), got {path!r}")
+        self._core.write_obj(os.fspath(path))
 
     # -- rendering -----------------------------------------------------------------------
     def render(self, width: int = 480, height: int = 480, camera: Mapping[str, Any] | None = None) -> np.ndarray:

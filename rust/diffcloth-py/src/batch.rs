@@ -2,10 +2,10 @@
 //! released) with one call. Arrays carry the member index first: (N, n, 3) states, (N, k, 3)
 //! attachment targets.
 
-use crate::conv::{read_nodes, read_steps, stats_dict, usize_arg};
-use crate::errors::{guarded, to_py_err, InputError, ParameterError};
+use crate::conv::{backward_options, read_nodes, read_steps, stats_dict, usize_arg};
+use crate::errors::{guarded, to_py_err, InputError};
 use crate::simulator::PySimulator;
-use diffcloth::{AdjointSolver, BackwardOptions, Batch, MemberInput, Vec3};
+use diffcloth::{Batch, MemberInput, Vec3};
 use numpy::ndarray::Array3;
 use numpy::{PyArray3, PyReadonlyArray2, PyReadonlyArray3, ToPyArray};
 use pyo3::prelude::*;
@@ -26,34 +26,6 @@ fn members_to_py<'py>(py: Python<'py>, rows: &[&[Vec3]]) -> Bound<'py, PyArray3<
     Array3::from_shape_vec((rows.len(), per, 3), flat)
         .expect("members have equal row counts")
         .to_pyarray(py)
-}
-
-/// Adjoint options from the binding's keyword arguments (None: the core's defaults).
-pub(crate) fn backward_options(
-    solver: Option<&str>,
-    tolerance: Option<f64>,
-    max_iterations: Option<&Bound<'_, PyAny>>,
-) -> PyResult<BackwardOptions> {
-    let defaults = BackwardOptions::default();
-    let solver = match solver {
-        None => defaults.solver,
-        Some("direct") => AdjointSolver::Direct,
-        Some("krylov") => AdjointSolver::Krylov,
-        Some("fixed_point") => AdjointSolver::FixedPoint,
-        Some(other) => {
-            return Err(ParameterError::new_err(format!(
-                "solver must be \"direct\", \"krylov\" or \"fixed_point\", got {other:?}"
-            )))
-        }
-    };
-    Ok(BackwardOptions {
-        solver,
-        tolerance: tolerance.unwrap_or(defaults.tolerance),
-        max_iterations: max_iterations
-            .map(|m| usize_arg("max_iterations", m))
-            .transpose()?
-            .unwrap_or(defaults.max_iterations),
-    })
 }
 
 impl PyBatch {

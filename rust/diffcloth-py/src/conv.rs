@@ -3,7 +3,8 @@
 
 use crate::errors::{InputError, ParameterError};
 use diffcloth::{
-    Branch, Contact, ContactKind, Gradients, Param, ParamValue, Profile, StepStats, Vec3,
+    AdjointSolver, BackwardOptions, Branch, Contact, ContactKind, Gradients, Param, ParamValue,
+    Profile, StepStats, Vec3,
 };
 use numpy::ndarray::Array2;
 use numpy::{Element, PyArray2, PyReadonlyArray2, PyReadonlyArray3, ToPyArray};
@@ -208,5 +209,33 @@ pub(crate) fn f64_arg(name: &str, value: &Bound<'_, PyAny>) -> PyResult<f64> {
     value.extract::<f64>().map_err(|_| {
         let shown = value.repr().map_or_else(|_| "?".into(), |r| r.to_string());
         ParameterError::new_err(format!("{name} must be a number, got {shown}"))
+    })
+}
+
+/// Adjoint options from the binding's keyword arguments (None: the core's defaults).
+pub(crate) fn backward_options(
+    solver: Option<&str>,
+    tolerance: Option<f64>,
+    max_iterations: Option<&Bound<'_, PyAny>>,
+) -> PyResult<BackwardOptions> {
+    let defaults = BackwardOptions::default();
+    let solver = match solver {
+        None => defaults.solver,
+        Some("direct") => AdjointSolver::Direct,
+        Some("krylov") => AdjointSolver::Krylov,
+        Some("fixed_point") => AdjointSolver::FixedPoint,
+        Some(other) => {
+            return Err(ParameterError::new_err(format!(
+                "solver must be \"direct\", \"krylov\" or \"fixed_point\", got {other:?}"
+            )))
+        }
+    };
+    Ok(BackwardOptions {
+        solver,
+        tolerance: tolerance.unwrap_or(defaults.tolerance),
+        max_iterations: max_iterations
+            .map(|m| usize_arg("max_iterations", m))
+            .transpose()?
+            .unwrap_or(defaults.max_iterations),
     })
 }

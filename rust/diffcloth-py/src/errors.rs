@@ -33,6 +33,8 @@ pub(crate) fn to_py_err(err: Error) -> PyErr {
         Error::Diverged(_) => DivergedError::new_err(message),
         Error::Contact(_) => ContactError::new_err(message),
         Error::Unsupported(_) => UnsupportedError::new_err(message),
+        // Only reached when a cancellation had no exception of its own to re-raise.
+        Error::Cancelled(_) => pyo3::exceptions::PyKeyboardInterrupt::new_err(message),
         // `Error` is non_exhaustive: a variant added later still reaches the base class.
         _ => DiffClothError::new_err(message),
     }

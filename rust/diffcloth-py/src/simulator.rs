@@ -2,18 +2,19 @@
 //! runs the core through `guarded` (GIL released, panics caught) and converts the result.
 
 use crate::conv::{
-    contacts_dict, f64_arg, gradients_dict, nodes_to_py, pairs_to_py, profile_dict, read_nodes,
-    read_steps, set_param_item, stats_dict, triangles_to_py, usize_arg,
+    backward_options, contacts_dict, f64_arg, gradients_dict, nodes_to_py, pairs_to_py,
+    profile_dict, read_nodes, read_steps, set_param_item, stats_dict, triangles_to_py, usize_arg,
 };
 use crate::errors::{guarded, InputError, ParameterError};
 use diffcloth::{
-    Acceleration, AdjointSolver, BackwardOptions, Param, ParamValue, Params, SceneConfig,
-    Simulator, SolverSettings, StepInput, StepStats, Vec3,
+    Acceleration, Cancel, Param, ParamValue, Params, SceneConfig, Simulator, SolverSettings,
+    StepInput, StepStats, Vec3,
 };
 use numpy::{PyArray2, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::Path;
+use std::sync::Mutex;
 
 #[pyclass(name = "Simulator", module = "diffcloth_gym._core")]
 pub(crate) struct PySimulator {
@@ -329,30 +330,27 @@ impl PySimulator {
         tolerance: Option<f64>,
         max_iterations: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let max_iterations = max_iterations
-            .map(|m| usize_arg("max_iterations", m))
-            .transpose()?;
-        let defaults = BackwardOptions::default();
-        let solver = match solver {
-            None => defaults.solver,
-            Some("direct") => AdjointSolver::Direct,
-            Some("krylov") => AdjointSolver::Krylov,
-            Some("fixed_point") => AdjointSolver::FixedPoint,
-            Some(other) => {
-                return Err(ParameterError::new_err(format!(
-                    "solver must be \"direct\", \"krylov\" or \"fixed_point\", got {other:?}"
-                )))
-            }
-        };
+        let options = backward_options(solver, tolerance, max_iterations)?;
         let (gx, gv) = (read_steps("dl_dx", dl_dx)?, read_steps("dl_dv", dl_dv)?);
         let sim = &mut self.inner;
-        let options = BackwardOptions {
-            solver,
-            tolerance: tolerance.unwrap_or(defaults.tolerance),
-            max_iterations: max_iterations.unwrap_or(defaults.max_iterations),
+        // Ctrl-C: the core polls this check (at most every 50 ms, between and inside adjoint
+        // solves); it takes the GIL back for a moment and keeps the signal handler's exception
+        // (KeyboardInterrupt, or whatever a custom handler raised) to re-raise as it was.
+        let interrupt: Mutex<Option<PyErr>> = Mutex::new(None);
+        let check = || match Python::attach(|py| py.check_signals()) {
+            Ok(()) => false,
+            Err(e) => {
+                *interrupt.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
+                true
+            }
         };
-        let g = guarded(py, || sim.backward(&gx, &gv, &options))?;
-        gradients_dict(py, &g)
+        let result = guarded(py, || {
+            sim.backward_cancellable(&gx, &gv, &options, &Cancel::new(&check))
+        });
+        if let Some(e) = interrupt.into_inner().unwrap_or_else(|p| p.into_inner()) {
+            return Err(e);
+        }
+        gradients_dict(py, &result?)
     }
 
     /// Records (on) or stops recording (off) the PD convergence trace of each step.

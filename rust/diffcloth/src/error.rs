@@ -33,6 +33,10 @@ pub enum Error {
     /// The state became non-finite; the step was rolled back.
     #[error("simulation diverged: {0}")]
     Diverged(String),
+    /// The caller's cancellation check asked the call to stop (see [`crate::Cancel`]); the
+    /// message names the stage. Nothing the call would have changed was changed.
+    #[error("cancelled during {0}")]
+    Cancelled(String),
 }
 
 pub type Result<T> = std::result::Result<T, Error>;

@@ -7,6 +7,7 @@
 pub mod anderson;
 pub mod backward;
 pub mod batch;
+pub mod cancel;
 pub mod collision;
 pub mod config;
 pub mod contact;
@@ -28,6 +29,7 @@ pub type Vec3 = nalgebra::Vector3<f64>;
 
 pub use backward::{AdjointSolver, AdjointWarmStart, BackwardOptions, Gradients};
 pub use batch::{Batch, MemberInput};
+pub use cancel::Cancel;
 pub use config::{BendModel, Effect, SceneConfig};
 pub use contact::{Branch, BranchCounts, Contact, ContactKind};
 pub use error::{Error, Result};

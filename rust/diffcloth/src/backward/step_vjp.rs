@@ -7,6 +7,7 @@
 
 use super::replay::Resume;
 use super::{BackwardOptions, Gradients};
+use crate::cancel::Cancel;
 use crate::error::{Error, Result};
 use crate::forward::Simulator;
 use crate::tape::Tape;
@@ -87,6 +88,8 @@ impl Simulator {
             &[],
             &[],
             options,
+            // One step: short enough that Ctrl-C waits for it (the caller checks between steps).
+            &Cancel::never(),
             Some(resume),
             &mut carry,
         )?;

@@ -59,6 +59,9 @@ pub struct Simulator {
     recording: Option<Recording>,
     profile: Profile,
     last: StepStats,
+    /// The last completed step's contacts: the workspace's are overwritten by a step that
+    /// then fails, and `contacts()` must agree with `last_step()` after a rollback.
+    last_contacts: Vec<Contact>,
 }
 
 /// What changes every step: positions, velocities, time and the attachment targets.
@@ -162,6 +165,7 @@ impl Simulator {
             recording: None,
             profile: Profile::default(),
             last: StepStats::default(),
+            last_contacts: Vec::new(),
         }
     }
 
@@ -279,7 +283,7 @@ impl Simulator {
     }
     /// The current step's contacts (frames, branches and impulses of the last step).
     pub fn contacts(&self) -> &[Contact] {
-        &self.work.contacts.contacts
+        &self.last_contacts
     }
     pub fn obstacles(&self) -> &[Obstacle] {
         &self.model.obstacles

@@ -65,6 +65,7 @@ impl Simulator {
         self.state.time += h;
         self.state.step_count += 1;
         self.last = stats;
+        self.last_contacts.clone_from(&self.work.contacts.contacts);
         let p = &mut self.profile;
         p.steps += 1;
         p.iterations += stats.iterations as u64;
