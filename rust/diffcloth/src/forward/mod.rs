@@ -23,6 +23,7 @@ mod detection;
 mod diagnostics;
 mod model;
 mod pd;
+mod registry;
 mod safeguards;
 mod state;
 mod step;
