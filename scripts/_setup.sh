@@ -17,7 +17,8 @@ if [ ! -f "$STAMP" ]; then
   echo "== installing Python dependencies"
   # torch: the CPU runs use PyPI's default wheel (it brings CUDA libraries; ~1-2 min fresh).
   "$PY" -m pip install -q --disable-pip-version-check "maturin>=1.9.4,<2" "numpy>=1.26" "pytest>=8" \
-    "matplotlib>=3.8" "torch>=2.8" "gymnasium>=1.4" "stable-baselines3>=2.9"
+    "matplotlib>=3.8" "torch>=2.8" "gymnasium>=1.4" "stable-baselines3>=2.9" \
+    "scipy>=1.11" "cma>=3.3" "tqdm>=4.66"
   rm -f "$VENV"/.deps-*
   touch "$STAMP"
 fi
