@@ -502,6 +502,21 @@ mod tests {
         assert_eq!(Param::from_name("mu"), None);
     }
 
+    /// `[solver]`: a preset first, explicit settings over it; the retired record settings
+    /// only when they change nothing (recording never changes the trajectory).
+    #[test]
+    fn solver_tables_apply_presets_and_refuse_a_separate_record_tolerance() {
+        let parse = |t: &str| toml::from_str::<SolverSettings>(t);
+        let s = parse("preset = \"gradient\"\nmax_iterations = 900").unwrap();
+        assert_eq!((s.tolerance, s.max_iterations), (1e-11, 900));
+        assert_eq!(parse("").unwrap(), SolverSettings::default());
+        let same = parse("tolerance = 1e-9\nrecord_tolerance = 1e-9\nrecord_max_iterations = 300");
+        assert_eq!(same.unwrap().tolerance, 1e-9);
+        let err = parse("record_tolerance = 1e-11").unwrap_err().to_string();
+        assert!(err.contains("record_tolerance is retired"), "{err}");
+        assert!(parse("preset = \"fast\"").is_err());
+    }
+
     /// Iteration caps size the trace: a cap beyond MAX_ITERATIONS is refused by name.
     #[test]
     fn iteration_caps_are_bounded() {
