@@ -4,8 +4,9 @@ Studies: ``accuracy`` (what each accuracy knob costs in time: forward Pareto fro
 backward solver table, gradient error vs forward tolerance, time step), ``stability`` (the
 hard-case suite; ``--full`` for the full size), ``step_time`` (forward ms/step per solver
 setting, and the contact scenes), ``backward_time`` (adjoint ms/step per solver),
-``env_throughput`` (env steps/s single and batched, step_grad cost, frames/s) and ``render``
-(frames/s of the software renderer; ``render --images`` writes docs/images/). Each writes
+``env_throughput`` (env steps/s single and batched, step_grad cost, frames/s), ``render``
+(frames/s of the software renderer; ``render --images`` writes docs/images/) and ``openloop``
+(open-loop optimization: ``openloop fig4``, the paper's Fig. 4; results ``openloop.{json,md}``). Each writes
 ``benchmarks/results/<study>.{json,md}`` (accuracy: ``accuracy_time``); ``<study> --help`` lists
 its options.
 """
@@ -22,6 +23,7 @@ STUDIES = {
     "backward_time": "benchmarks.backward_time",
     "env_throughput": "benchmarks.env_throughput",
     "render": "benchmarks.render",
+    "openloop": "benchmarks.openloop",
 }
 
 

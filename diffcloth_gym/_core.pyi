@@ -11,7 +11,7 @@ import numpy as np
 import numpy.typing as npt
 
 __version__: str
-#: The differentiable physical parameters (the core's name table).
+#: The differentiable physical parameters (the core's name table, friction included).
 PARAM_NAMES: list[str]
 
 class Simulator:
@@ -73,13 +73,13 @@ class Simulator:
     def num_nodes(self) -> int:
         """Number of mesh nodes n."""
     def params(self) -> dict[str, Any]:
-        """Physical parameters: h, density, k_stretch, k_bend, k_attach, gravity, wind_*."""
+        """Physical parameters by registry name: h, density, k_*, gravity, wind_*, mu_obstacles, mu_self."""
     def set_params(self, **kwargs: Any) -> None:
-        """Updates physical parameters by name; unknown names and bad values raise."""
+        """Updates physical parameters by name (friction included); bad names or values raise, nothing changes."""
     def solver(self) -> dict[str, Any]:
-        """Solver settings: max_iterations, tolerance, acceleration, history, parallel, record_*."""
+        """Solver settings of every step, recorded or not: max_iterations, tolerance, acceleration, history, parallel."""
     def set_solver(self, **kwargs: Any) -> None:
-        """Updates solver settings by name (the keys of solver())."""
+        """Updates solver settings by name (the keys of solver(), or preset="simulation" | "gradient" first)."""
     def profile(self) -> dict[str, float]:
         """Per-stage wall time (seconds) and counters accumulated since the last reset_profile()."""
     def reset_profile(self) -> None:

@@ -175,23 +175,35 @@ class Simulator:
         return self._core.effects
 
     # -- parameters ----------------------------------------------------------------------
+    #: Every differentiable parameter's name: the keys of :meth:`params`, :meth:`set_params`,
+    #: the gradient dict of :meth:`backward` and ``diffcloth_gym.torch`` (one registry).
+    PARAM_NAMES: tuple[str, ...] = tuple(_core.PARAM_NAMES)
+
     def params(self) -> dict:
-        """Physical parameters: h, density, k_stretch, k_bend, k_attach, gravity, wind_*."""
+        """Physical parameters by name: h, density, k_stretch, k_bend, k_attach, gravity,
+        wind_direction, wind_omega, wind_phi, mu_obstacles (one friction coefficient per
+        obstacle, config order) and mu_self (scenes with self-collision)."""
         return self._core.params()
 
     def set_params(self, **params: Any) -> None:
-        """Changes physical parameters by name; refactors the system matrix only when h,
-        density or a stiffness changes. Unknown names or invalid values raise
+        """Changes physical parameters by the names of :meth:`params` (e.g.
+        ``set_params(k_stretch=800.0, mu_obstacles=[0.3])``); refactors the system matrix only
+        when h, density or a stiffness changes. Unknown names or invalid values raise
         :class:`~diffcloth_gym.errors.ParameterError` and change nothing."""
-        self._core.set_params(**params)
+        self._core.set_params(**{k: np.asarray(v, dtype=np.float64).tolist() if isinstance(v, np.ndarray) else v
+                                 for k, v in params.items()})
 
     def solver(self) -> dict:
-        """Accuracy knobs: max_iterations, tolerance, record_tolerance (for steps recorded for
-        backward, default 1e-11), acceleration, history, parallel."""
+        """Accuracy knobs of every step, recorded or not: max_iterations, tolerance,
+        acceleration, history, parallel."""
         return self._core.solver()
 
     def set_solver(self, **settings: Any) -> None:
-        """Changes solver settings by name (see :meth:`solver`)."""
+        """Changes solver settings by name (see :meth:`solver`). ``preset="simulation"``
+        (tolerance 1e-8, cap 300: the default) or ``preset="gradient"`` (1e-11, cap 2000: what
+        the adjoint needs; 1.1-1.7x the cost of a loss with its gradient) sets tolerance and
+        cap, explicit settings override it. A recorded rollout is the same trajectory as an
+        unrecorded one with the same settings."""
         self._core.set_solver(**settings)
 
     # -- gradients -----------------------------------------------------------------------
@@ -212,40 +224,56 @@ class Simulator:
                  tolerance: float | None = None, max_iterations: int | None = None) -> dict:
         """Adjoint gradients of a loss through the recorded steps.
 
-        ``dl_dx`` and ``dl_dv``: (N, n, 3) gradients of the loss with respect to the positions
-        and velocities after each of the N recorded steps (``None`` for zero). ``solver``:
-        ``"krylov"`` (CG, or BiCGStab with active contacts, preconditioned by the PD
-        factorization; default), ``"direct"`` (sparse LU) or ``"fixed_point"`` (the paper's Eqn. 30); iterative solves that stall fall
-        back to ``"direct"`` and are counted in ``fell_back``.
+        ``dl_dx`` and ``dl_dv``: gradients of the loss with respect to the positions and
+        velocities after the recorded steps, each one of: ``None`` (zero); an (N, n, 3) array
+        (one entry per recorded step); an (n, 3) array (the final step only: a terminal loss);
+        or a dict ``{step: (n, 3) array}`` (negative steps count from the end, so ``{-1: g}``
+        is the final step). ``solver``: ``"krylov"`` (CG, or BiCGStab with active contacts,
+        preconditioned by the PD factorization; default), ``"direct"`` (sparse LU) or
+        ``"fixed_point"`` (the paper's Eqn. 30); iterative solves that stall fall back to
+        ``"direct"`` and are counted in ``fell_back``.
 
-        Returns numpy arrays ``x0``, ``v0`` (n, 3); per step lists ``attachment_targets`` and
-        ``external_forces`` (and ``external_forces_constant``, the gradient for a force held
-        constant over the rollout, or None); scalars ``k_stretch``, ``k_bend``, ``k_attach``, ``density``,
-        ``wind_omega``, ``wind_phi``, ``mu_self``; ``mu_obstacles`` (one per obstacle); 3-lists
-        ``gravity``, ``wind_direction``; per-step solver
-        stats ``iterations``, ``fell_back``, ``residual``; a stage ``profile``; and ``warnings``:
-        the reasons the gradient may be untrustworthy (e.g. recorded steps that stopped above
-        the residual the adjoint needs). Gradients are never clipped or rescaled.
+        Returns numpy arrays ``x0``, ``v0`` (n, 3); per step ``attachment_targets`` (N, k, 3)
+        and ``external_forces`` (N, n, 3; (N, 0, 3) without the effect), and
+        ``external_forces_constant`` (n, 3), the gradient for a force held constant over the
+        rollout (None without the effect); every parameter of :attr:`PARAM_NAMES` by the name
+        :meth:`params` and :meth:`set_params` use (scalars; 3-lists ``gravity``,
+        ``wind_direction``; ``mu_obstacles`` one per obstacle); per-step solver stats arrays
+        ``iterations``, ``fell_back``, ``residual``; a stage ``profile``; and ``warnings``: the
+        reasons the gradient may be untrustworthy (e.g. recorded steps that stopped above the
+        residual the adjoint needs: record with ``set_solver(preset="gradient")``). Gradients
+        are never clipped or rescaled.
         """
         steps, _ = self.tape_info()
+        n = self.num_nodes
+
         def grads(name, a):
             if a is None:
                 return None
+            if isinstance(a, Mapping):
+                out = np.zeros((steps, n, 3))
+                for k, g in a.items():
+                    if not isinstance(k, (int, np.integer)) or not -steps <= k < steps:
+                        raise InputError(f"{name} has step {k!r}; the tape has {steps} recorded steps")
+                    out[k] = _nodes(f"{name}[{k}]", g, n)
+                return out
             try:
                 arr = np.ascontiguousarray(a, dtype=np.float64)
             except (TypeError, ValueError) as e:
-                raise InputError(f"{name} must be an (N, n, 3) array: {e}") from None
-            if arr.shape != (steps, self.num_nodes, 3):
-                raise InputError(f"{name} must have shape ({steps}, {self.num_nodes}, 3), got {arr.shape}")
+                raise InputError(f"{name} must be an (N, n, 3) or (n, 3) array or a dict: {e}") from None
+            if arr.shape == (n, 3) and steps:
+                # A terminal loss: the final step only.
+                out = np.zeros((steps, n, 3))
+                out[-1] = arr
+                return out
+            if arr.shape != (steps, n, 3):
+                raise InputError(f"{name} must have shape ({steps}, {n}, 3) or ({n}, 3), got {arr.shape}")
             return arr
         out = self._core.backward(grads("dl_dx", dl_dx), grads("dl_dv", dl_dv), solver,
                                   None if tolerance is None else _real("tolerance", tolerance),
                                   max_iterations)
-        out["attachment_targets"] = [np.asarray(a) for a in out["attachment_targets"]]
-        out["external_forces"] = [np.asarray(a) for a in out["external_forces"]]
-        # A force held constant over the rollout: the sum of the per-step gradients.
-        per_step = [a for a in out["external_forces"] if a.size]
-        out["external_forces_constant"] = np.sum(per_step, axis=0) if per_step else None
+        forces = out["external_forces"]
+        out["external_forces_constant"] = forces.sum(axis=0) if forces.size else None
         return out
 
     def set_obstacle_mu(self, index: int, mu: float) -> None:

@@ -51,7 +51,7 @@ impl Gradients {
 
     /// The gradient with respect to a parameter, by the shared name table (None for `h`).
     pub fn param(&self, p: Param) -> Option<ParamValue> {
-        use ParamValue::{Scalar, Vector};
+        use ParamValue::{List, Scalar, Vector};
         Some(match p {
             Param::H => return None,
             Param::Density => Scalar(self.density),
@@ -62,6 +62,8 @@ impl Gradients {
             Param::WindDirection => Vector(self.wind_direction),
             Param::WindOmega => Scalar(self.wind_omega),
             Param::WindPhi => Scalar(self.wind_phi),
+            Param::MuObstacles => List(self.mu_obstacles.clone()),
+            Param::MuSelf => Scalar(self.mu_self),
         })
     }
 }

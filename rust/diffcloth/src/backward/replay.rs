@@ -256,8 +256,9 @@ impl Simulator {
             let first = grads.loose_steps.iter().map(|&(k, _)| k).min().unwrap_or(0);
             grads.warnings.push(format!(
                 "{} of {steps} recorded steps stopped above the residual {TRUSTED_FORWARD_RESIDUAL:e} (worst {worst:.1e}, first at step {first}): \
-                 the adjoint linearizes unconverged steps and the gradient may be inaccurate; lower \
-                 solver.record_tolerance or raise record_max_iterations",
+                 the adjoint linearizes unconverged steps and the gradient may be inaccurate; record \
+                 with solver preset \"gradient\" (tolerance 1e-11, max_iterations 2000) or a lower \
+                 solver.tolerance",
                 grads.loose_steps.len()
             ));
         }

@@ -24,6 +24,7 @@ mod diagnostics;
 mod model;
 mod overlap;
 mod pd;
+mod registry;
 mod safeguards;
 mod state;
 mod step;
