@@ -3,7 +3,10 @@
 Studies: ``accuracy`` (what each accuracy knob costs in time: forward Pareto fronts, the
 backward solver table, gradient error vs forward tolerance, time step), ``stability`` (the
 hard-case suite; ``--full`` for the full size), ``step_time`` (forward ms/step per solver
-setting, and the contact scenes) and ``backward_time`` (adjoint ms/step per solver). Each writes
+setting, and the contact scenes), ``backward_time`` (adjoint ms/step per solver),
+``env_throughput`` (env steps/s single and batched, step_grad cost, frames/s), ``render``
+(frames/s of the software renderer; ``render --images`` writes docs/images/) and ``openloop``
+(open-loop optimization: ``openloop fig4``, the paper's Fig. 4; results ``openloop.{json,md}``). Each writes
 ``benchmarks/results/<study>.{json,md}`` (accuracy: ``accuracy_time``); ``<study> --help`` lists
 its options.
 """
@@ -18,6 +21,9 @@ STUDIES = {
     "stability": "benchmarks.stability",
     "step_time": "benchmarks.step_time",
     "backward_time": "benchmarks.backward_time",
+    "env_throughput": "benchmarks.env_throughput",
+    "render": "benchmarks.render",
+    "openloop": "benchmarks.openloop",
 }
 
 

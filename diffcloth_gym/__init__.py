@@ -11,6 +11,7 @@ The simulator is projective-dynamics cloth after DiffCloth (Li et al. 2022). Sta
 
 from diffcloth_gym.errors import (
     ConfigError,
+    ContactError,
     ConvergenceWarning,
     DiffClothError,
     DivergedError,
@@ -18,15 +19,20 @@ from diffcloth_gym.errors import (
     InternalError,
     MeshError,
     ParameterError,
+    PenetrationWarning,
     SolverError,
     UnsupportedError,
 )
 from diffcloth_gym.scenes import CONFIG_DIR, contact_free, load_scene, scene_names
 from diffcloth_gym.simulator import Simulator
+from diffcloth_gym.envs import register_envs
+
+register_envs()
 
 __all__ = [
     "CONFIG_DIR",
     "ConfigError",
+    "ContactError",
     "ConvergenceWarning",
     "DiffClothError",
     "DivergedError",
@@ -34,6 +40,7 @@ __all__ = [
     "InternalError",
     "MeshError",
     "ParameterError",
+    "PenetrationWarning",
     "Simulator",
     "SolverError",
     "UnsupportedError",

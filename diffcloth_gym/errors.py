@@ -33,6 +33,12 @@ class DivergedError(SolverError):
     """The state became non-finite; the step was rolled back, the simulator stays usable."""
 
 
+class ContactError(SolverError):
+    """A step could not keep the cloth out of an obstacle (a node kept crossing it after
+    repeated re-detection of the step's contacts); the step was rolled back, the simulator
+    stays usable. A smaller time step ``h`` helps."""
+
+
 class UnsupportedError(DiffClothError, NotImplementedError):
     """The request is valid but not supported yet (the message says what)."""
 
@@ -46,3 +52,13 @@ class ConvergenceWarning(UserWarning):
     state is not the implicit-Euler solution, and with contact the contact law (and the
     non-penetration it implies) holds only approximately. Raise ``solver.max_iterations``, or
     see ``profile()["unconverged_steps"]``."""
+
+
+class PenetrationWarning(UserWarning):
+    """The state starts with nodes inside an obstacle, or with self-contact pairs closer than
+    the contact radius (a cloth folded exactly onto itself). The contact law closes such an
+    overlap within one step, so the first step throws those nodes out at up to depth / h and
+    the cloth gains kinetic energy it never had (10 m inside a plane at h = 0.01: 1000 m/s).
+    Raised by construction and :meth:`~diffcloth_gym.Simulator.reset`; the message names the
+    deepest node, its depth and the speed. Start the cloth outside the obstacles and its layers
+    at least the self-contact radius apart."""

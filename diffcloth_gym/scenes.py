@@ -46,17 +46,26 @@ def load_config(config: str | Path | Mapping[str, Any]) -> tuple[dict, Path]:
             raise ConfigError(f"no scene config {str(config)!r} (not a file; shipped scenes: {scene_names()})")
         # Shipped scenes use no relative paths; their base is their folder when it is one.
         base = packaged.resolve().parent if isinstance(packaged, Path) else Path.cwd()
-        return _parse(packaged.read_text(encoding="utf-8"), packaged), base
+        return _parse(packaged.read_bytes(), packaged), base
     if not path.is_file():
         raise ConfigError(f"no scene config {str(config)!r} (not a file; shipped scenes: {scene_names()})")
-    return _parse(path.read_text(encoding="utf-8"), path), path.resolve().parent
+    return _parse(path.read_bytes(), path), path.resolve().parent
 
 
-def _parse(text: str, origin: Any) -> dict:
+def _parse(data: bytes, origin: Any) -> dict:
+    """Parses a TOML file's bytes; every way it can be malformed is a ConfigError naming it."""
+    try:
+        # utf-8-sig: a byte-order mark (some Windows editors write one) is not part of TOML.
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{origin}: not UTF-8 text (byte {e.start}: {data[e.start:e.start + 1]!r})") from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{origin}: {e}") from None
+    except RecursionError:
+        # tomllib recurses once per nesting level of arrays and inline tables.
+        raise ConfigError(f"{origin}: arrays or tables are nested too deeply") from None
 
 
 def load_scene(config: str | Path | Mapping[str, Any], **mesh: Any) -> dict:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import warnings
 from pathlib import Path
 from typing import Any, Mapping
@@ -10,7 +11,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from diffcloth_gym import _core
-from diffcloth_gym.errors import ConfigError, ConvergenceWarning, InputError
+from diffcloth_gym.errors import ConfigError, ConvergenceWarning, InputError, PenetrationWarning
 from diffcloth_gym.scenes import load_config
 
 
@@ -25,6 +26,17 @@ def _nodes(name: str, value: Any, rows: int | None = None) -> np.ndarray:
     if rows is not None and a.shape[0] != rows:
         raise InputError(f"{name} must have {rows} rows, got {a.shape[0]}")
     return a
+
+
+def _real(name: str, value: Any) -> float:
+    """A real-number argument as a float; anything else (a string, None, an int too large for a
+    float) is an InputError naming ``name``, not Python's TypeError/ValueError/OverflowError."""
+    if not isinstance(value, (str, bytes)):
+        try:
+            return float(value)
+        except (TypeError, ValueError, OverflowError):
+            pass
+    raise InputError(f"{name} must be a real number, got {value!r}")
 
 
 class Simulator:
@@ -42,6 +54,7 @@ class Simulator:
         # Bumped by everything that changes the tape (reset, step, set_recording), so a
         # holder of a recorded rollout (diffcloth_gym.torch) can tell it is still the same.
         self._tape_version = 0
+        self._warn_overlaps(stacklevel=4)
 
     @classmethod
     def from_config(cls, config: str | Path | Mapping[str, Any]) -> "Simulator":
@@ -52,15 +65,28 @@ class Simulator:
             text = json.dumps(cfg)
         except (TypeError, ValueError) as e:
             raise ConfigError(f"config is not serializable: {e}") from None
+        except RecursionError:
+            raise ConfigError("config is nested too deeply (or contains itself)") from None
         return cls(_core.Simulator.from_json(text, str(base)), cfg)
 
     # -- state ---------------------------------------------------------------------------
     def reset(self, x: Any = None, v: Any = None) -> None:
         """Sets positions ``x`` (default: rest shape) and velocities ``v`` (default: zero),
-        time to 0 and attachment targets to the attached nodes' positions."""
+        time to 0 and attachment targets to the attached nodes' positions. Positions inside an
+        obstacle, or self-contact pairs closer than the radius, raise a
+        :class:`~diffcloth_gym.errors.PenetrationWarning` (with the depth): the first step
+        throws them out."""
         n = self.num_nodes
         self._tape_version += 1
         self._core.reset(None if x is None else _nodes("x", x, n), None if v is None else _nodes("v", v, n))
+        self._warn_overlaps(stacklevel=3)
+
+    def _warn_overlaps(self, stacklevel: int) -> None:
+        """A :class:`PenetrationWarning` if the state starts inside an obstacle or with
+        self-contact pairs closer than the radius: the first step would throw them out."""
+        message = self._core.overlap_warning()
+        if message:
+            warnings.warn(message, PenetrationWarning, stacklevel=stacklevel)
 
     def step(self, attachment_targets: Any = None, external_forces: Any = None, steps: int = 1) -> dict:
         """Advances ``steps`` implicit-Euler steps (default 1).
@@ -126,7 +152,7 @@ class Simulator:
 
     @time.setter
     def time(self, t: float) -> None:
-        self._core.time = float(t)
+        self._core.time = _real("time", t)
 
     @property
     def attachment_nodes(self) -> list[int]:
@@ -149,23 +175,35 @@ class Simulator:
         return self._core.effects
 
     # -- parameters ----------------------------------------------------------------------
+    #: Every differentiable parameter's name: the keys of :meth:`params`, :meth:`set_params`,
+    #: the gradient dict of :meth:`backward` and ``diffcloth_gym.torch`` (one registry).
+    PARAM_NAMES: tuple[str, ...] = tuple(_core.PARAM_NAMES)
+
     def params(self) -> dict:
-        """Physical parameters: h, density, k_stretch, k_bend, k_attach, gravity, wind_*."""
+        """Physical parameters by name: h, density, k_stretch, k_bend, k_attach, gravity,
+        wind_direction, wind_omega, wind_phi, mu_obstacles (one friction coefficient per
+        obstacle, config order) and mu_self (scenes with self-collision)."""
         return self._core.params()
 
     def set_params(self, **params: Any) -> None:
-        """Changes physical parameters by name; refactors the system matrix only when h,
-        density or a stiffness changes. Unknown names or invalid values raise
+        """Changes physical parameters by the names of :meth:`params` (e.g.
+        ``set_params(k_stretch=800.0, mu_obstacles=[0.3])``); refactors the system matrix only
+        when h, density or a stiffness changes. Unknown names or invalid values raise
         :class:`~diffcloth_gym.errors.ParameterError` and change nothing."""
-        self._core.set_params(**params)
+        self._core.set_params(**{k: np.asarray(v, dtype=np.float64).tolist() if isinstance(v, np.ndarray) else v
+                                 for k, v in params.items()})
 
     def solver(self) -> dict:
-        """Accuracy knobs: max_iterations, tolerance, record_tolerance (for steps recorded for
-        backward, default 1e-11), acceleration, history, parallel."""
+        """Accuracy knobs of every step, recorded or not: max_iterations, tolerance,
+        acceleration, history, parallel."""
         return self._core.solver()
 
     def set_solver(self, **settings: Any) -> None:
-        """Changes solver settings by name (see :meth:`solver`)."""
+        """Changes solver settings by name (see :meth:`solver`). ``preset="simulation"``
+        (tolerance 1e-8, cap 300: the default) or ``preset="gradient"`` (1e-11, cap 2000: what
+        the adjoint needs; 1.1-1.7x the cost of a loss with its gradient) sets tolerance and
+        cap, explicit settings override it. A recorded rollout is the same trajectory as an
+        unrecorded one with the same settings."""
         self._core.set_solver(**settings)
 
     # -- gradients -----------------------------------------------------------------------
@@ -186,49 +224,67 @@ class Simulator:
                  tolerance: float | None = None, max_iterations: int | None = None) -> dict:
         """Adjoint gradients of a loss through the recorded steps.
 
-        ``dl_dx`` and ``dl_dv``: (N, n, 3) gradients of the loss with respect to the positions
-        and velocities after each of the N recorded steps (``None`` for zero). ``solver``:
-        ``"krylov"`` (CG, or BiCGStab with active contacts, preconditioned by the PD
-        factorization; default), ``"direct"`` (sparse LU) or ``"fixed_point"`` (the paper's Eqn. 30); iterative solves that stall fall
-        back to ``"direct"`` and are counted in ``fell_back``.
+        ``dl_dx`` and ``dl_dv``: gradients of the loss with respect to the positions and
+        velocities after the recorded steps, each one of: ``None`` (zero); an (N, n, 3) array
+        (one entry per recorded step); an (n, 3) array (the final step only: a terminal loss);
+        or a dict ``{step: (n, 3) array}`` (negative steps count from the end, so ``{-1: g}``
+        is the final step). ``solver``: ``"krylov"`` (CG, or BiCGStab with active contacts,
+        preconditioned by the PD factorization; default), ``"direct"`` (sparse LU) or
+        ``"fixed_point"`` (the paper's Eqn. 30); iterative solves that stall fall back to
+        ``"direct"`` and are counted in ``fell_back``.
 
-        Returns numpy arrays ``x0``, ``v0`` (n, 3); per step lists ``attachment_targets`` and
-        ``external_forces`` (and ``external_forces_constant``, the gradient for a force held
-        constant over the rollout, or None); scalars ``k_stretch``, ``k_bend``, ``k_attach``, ``density``,
-        ``wind_omega``, ``wind_phi``, ``mu_self``; ``mu_obstacles`` (one per obstacle); 3-lists
-        ``gravity``, ``wind_direction``; per-step solver
-        stats ``iterations``, ``fell_back``, ``residual``; a stage ``profile``; and ``warnings``:
-        the reasons the gradient may be untrustworthy (e.g. recorded steps that stopped above
-        the residual the adjoint needs). Gradients are never clipped or rescaled.
+        Returns numpy arrays ``x0``, ``v0`` (n, 3); per step ``attachment_targets`` (N, k, 3)
+        and ``external_forces`` (N, n, 3; (N, 0, 3) without the effect), and
+        ``external_forces_constant`` (n, 3), the gradient for a force held constant over the
+        rollout (None without the effect); every parameter of :attr:`PARAM_NAMES` by the name
+        :meth:`params` and :meth:`set_params` use (scalars; 3-lists ``gravity``,
+        ``wind_direction``; ``mu_obstacles`` one per obstacle); per-step solver stats arrays
+        ``iterations``, ``fell_back``, ``residual``; a stage ``profile``; and ``warnings``: the
+        reasons the gradient may be untrustworthy (e.g. recorded steps that stopped above the
+        residual the adjoint needs: record with ``set_solver(preset="gradient")``). Gradients
+        are never clipped or rescaled.
         """
         steps, _ = self.tape_info()
+        n = self.num_nodes
+
         def grads(name, a):
             if a is None:
                 return None
+            if isinstance(a, Mapping):
+                out = np.zeros((steps, n, 3))
+                for k, g in a.items():
+                    if not isinstance(k, (int, np.integer)) or not -steps <= k < steps:
+                        raise InputError(f"{name} has step {k!r}; the tape has {steps} recorded steps")
+                    out[k] = _nodes(f"{name}[{k}]", g, n)
+                return out
             try:
                 arr = np.ascontiguousarray(a, dtype=np.float64)
             except (TypeError, ValueError) as e:
-                raise InputError(f"{name} must be an (N, n, 3) array: {e}") from None
-            if arr.shape != (steps, self.num_nodes, 3):
-                raise InputError(f"{name} must have shape ({steps}, {self.num_nodes}, 3), got {arr.shape}")
+                raise InputError(f"{name} must be an (N, n, 3) or (n, 3) array or a dict: {e}") from None
+            if arr.shape == (n, 3) and steps:
+                # A terminal loss: the final step only.
+                out = np.zeros((steps, n, 3))
+                out[-1] = arr
+                return out
+            if arr.shape != (steps, n, 3):
+                raise InputError(f"{name} must have shape ({steps}, {n}, 3) or ({n}, 3), got {arr.shape}")
             return arr
         out = self._core.backward(grads("dl_dx", dl_dx), grads("dl_dv", dl_dv), solver,
-                                  None if tolerance is None else float(tolerance),
-                                  None if max_iterations is None else int(max_iterations))
-        out["attachment_targets"] = [np.asarray(a) for a in out["attachment_targets"]]
-        out["external_forces"] = [np.asarray(a) for a in out["external_forces"]]
-        # A force held constant over the rollout: the sum of the per-step gradients.
-        per_step = [a for a in out["external_forces"] if a.size]
-        out["external_forces_constant"] = np.sum(per_step, axis=0) if per_step else None
+                                  None if tolerance is None else _real("tolerance", tolerance),
+                                  max_iterations)
+        forces = out["external_forces"]
+        out["external_forces_constant"] = forces.sum(axis=0) if forces.size else None
         return out
 
     def set_obstacle_mu(self, index: int, mu: float) -> None:
         """Sets the Coulomb friction coefficient of obstacle ``index``."""
-        self._core.set_obstacle_mu(int(index), float(mu))
+        # The binding checks both and names the one that is wrong (int() and float() here
+        # raised TypeError/ValueError, and int(1.5) silently picked obstacle 1).
+        self._core.set_obstacle_mu(index, mu)
 
     def set_self_mu(self, mu: float) -> None:
         """Sets the self-contact friction coefficient."""
-        self._core.set_self_mu(float(mu))
+        self._core.set_self_mu(mu)
 
     # -- diagnostics ---------------------------------------------------------------------
     def profile(self) -> dict:
@@ -275,4 +331,15 @@ class Simulator:
 
     def write_obj(self, path: str | Path) -> None:
         """Writes the current state as a Wavefront OBJ file."""
-        self._core.write_obj(str(path))
+        # str(None) would be the file name "None": only real paths are accepted.
+        if not isinstance(path, (str, os.PathLike)) or not os.fspath(path):
+            raise InputError(f"path must be a file path (str or os.PathLike), got {path!r}")
+        self._core.write_obj(os.fspath(path))
+
+    # -- rendering -----------------------------------------------------------------------
+    def render(self, width: int = 480, height: int = 480, camera: Mapping[str, Any] | None = None) -> np.ndarray:
+        """The current state as a (height, width, 3) uint8 RGB frame, drawn by the Rust software
+        renderer (no OpenGL; see :mod:`diffcloth_gym.rendering` for the camera dict)."""
+        from diffcloth_gym.rendering import render_rgb
+
+        return render_rgb(self, width, height, camera)

@@ -4,9 +4,14 @@
 and returns ``(x_next, v_next)`` as tensors whose graph runs through the Rust adjoint (contact
 included); ``rollout`` chains steps, so ``loss.backward()`` works on losses built from any
 steps' states. Gradients flow to ``x``, ``v``, the attachment ``targets`` (the actions), the
-per-node ``forces`` and the scalar/vector physical parameters given in ``params``
-(``k_stretch``, ``k_bend``, ``k_attach``, ``density``, ``wind_omega``, ``wind_phi``,
-``gravity``, ``wind_direction``). Nothing is clipped.
+per-node ``forces`` and the physical parameters given in ``params``, by the names
+``Simulator.params()`` uses (``PARAM_NAMES``: ``k_stretch``, ``k_bend``, ``k_attach``,
+``density``, ``wind_omega``, ``wind_phi``, ``mu_self`` scalars; ``gravity``,
+``wind_direction`` 3-vectors; ``mu_obstacles`` one entry per obstacle). Nothing is clipped.
+
+Steps run at the simulator's solver settings, recorded or not: for gradients set
+``sim.set_solver(preset="gradient")`` first (the backward warns when the recorded steps are
+too loose).
 
 ``rollout`` is one autograd node: its forward records the whole rollout on the simulator's
 tape (optionally checkpointed) and its backward runs one adjoint pass over it, warm-started
@@ -138,8 +143,9 @@ def _check_inputs(params: dict, tensors) -> tuple:
 def step(sim: Simulator, x: torch.Tensor, v: torch.Tensor, targets: torch.Tensor | None = None,
          forces: torch.Tensor | None = None, params: dict | None = None, time: float = 0.0):
     """One differentiable step from state ``(x, v)`` at simulated ``time``; returns
-    ``(x_next, v_next)``. ``params`` maps parameter names to float64 tensors (scalars, or
-    3-vectors for ``gravity`` and ``wind_direction``)."""
+    ``(x_next, v_next)``. ``params`` maps parameter names to float64 tensors (scalars,
+    3-vectors for ``gravity`` and ``wind_direction``, one entry per obstacle for
+    ``mu_obstacles``)."""
     params = params or {}
     names = _check_inputs(params, [("x", x), ("v", v), ("targets", targets), ("forces", forces)])
     return StepFunction.apply(sim, float(time), names, x, v, targets, forces, *[params[k] for k in names])

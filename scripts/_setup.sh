@@ -17,12 +17,15 @@ if [ ! -f "$STAMP" ]; then
   echo "== installing Python dependencies"
   # torch: the CPU runs use PyPI's default wheel (it brings CUDA libraries; ~1-2 min fresh).
   "$PY" -m pip install -q --disable-pip-version-check "maturin>=1.9.4,<2" "numpy>=1.26" "pytest>=8" \
-    "matplotlib>=3.8" "torch>=2.8"
+    "matplotlib>=3.8" "torch>=2.8" "gymnasium>=1.4" "stable-baselines3>=2.9" "moviepy>=2" \
+    "tqdm>=4.66" "pillow>=10" "hypothesis>=6" \
+    "scipy>=1.11" "cma>=3.3"
   rm -f "$VENV"/.deps-*
   touch "$STAMP"
 fi
 echo "== building the Rust extension (release)"
 # A stale per-version extension would shadow the abi3 one.
 find "$ROOT/diffcloth_gym" -maxdepth 1 -name '_core.cpython-*.so' -delete
-"$VENV/bin/maturin" develop --release --quiet
+# As a module: a copied venv's console scripts point at the interpreter they were made with.
+"$PY" -m maturin develop --release --quiet
 "$PY" -c "import diffcloth_gym" || { echo "error: the extension did not build" >&2; exit 1; }

@@ -24,9 +24,16 @@ def small():
 
 def pytest_addoption(parser):
     parser.addoption("--full", action="store_true", default=False,
-                     help="run tests/stability at the full (issue) sizes instead of the CI sizes (minutes)")
+                     help="run tests/stability at the full (issue) sizes instead of the CI sizes (minutes), "
+                          "and ten times the property-based examples (tests/test_properties.py)")
+
+
+#: Set from --full before the test modules are imported (they size themselves by it).
+FULL = False
 
 
 def pytest_configure(config):
+    global FULL
+    FULL = config.getoption("--full")
     config.addinivalue_line(
         "markers", "stability: hard-case numerical stability suite (tests/stability; --full for the full sizes)")

@@ -19,10 +19,14 @@ def _stub_class(name: str) -> ast.ClassDef:
     return next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == name)
 
 
-def _stub_members() -> dict[str, ast.FunctionDef]:
-    """Public members of the stubbed Simulator; a property's setter shares its getter's name."""
+#: The extension's classes whose members are checked against the stub.
+CLASSES = ("Simulator", "Batch", "Renderer")
+
+
+def _stub_members(cls: str = "Simulator") -> dict[str, ast.FunctionDef]:
+    """Public members of a stubbed class; a property's setter shares its getter's name."""
     members = {}
-    for node in _stub_class("Simulator").body:
+    for node in _stub_class(cls).body:
         if isinstance(node, ast.FunctionDef) and not node.name.startswith("_"):
             members.setdefault(node.name, node)
     return members
@@ -59,9 +63,10 @@ def _runtime_params(obj) -> list[tuple[str, object]] | None:
     return out
 
 
-def test_stub_names_equal_the_runtime_names():
-    runtime = {n for n in dir(_core.Simulator) if not n.startswith("_")}
-    assert set(_stub_members()) == runtime
+@pytest.mark.parametrize("cls", CLASSES)
+def test_stub_names_equal_the_runtime_names(cls):
+    runtime = {n for n in dir(getattr(_core, cls)) if not n.startswith("_")}
+    assert set(_stub_members(cls)) == runtime
 
 
 def test_module_level_names_are_stubbed():
@@ -72,17 +77,17 @@ def test_module_level_names_are_stubbed():
     assert stubbed == runtime
 
 
-@pytest.mark.parametrize("name", sorted(_stub_members()))
-def test_stubbed_member_matches_the_runtime_kind_and_signature(name):
-    fn = _stub_members()[name]
-    static = inspect.getattr_static(_core.Simulator, name)
+@pytest.mark.parametrize("cls, name", [(c, n) for c in CLASSES for n in sorted(_stub_members(c))])
+def test_stubbed_member_matches_the_runtime_kind_and_signature(cls, name):
+    fn = _stub_members(cls)[name]
+    static = inspect.getattr_static(getattr(_core, cls), name)
     is_property = "property" in _decorators(fn)
     assert is_property == isinstance(static, types.GetSetDescriptorType)
     assert ("staticmethod" in _decorators(fn)) == isinstance(static, staticmethod)
     assert ast.get_docstring(fn), f"{name} needs a one-line docstring in the stub"
     if is_property:
         return
-    runtime = _runtime_params(getattr(_core.Simulator, name))
+    runtime = _runtime_params(getattr(getattr(_core, cls), name))
     if runtime is not None:
         assert _stub_params(fn) == runtime
 
@@ -103,3 +108,9 @@ def test_settable_properties_are_the_stubbed_setters():
             except AttributeError:
                 pass
     assert settable == setters
+
+
+@pytest.mark.parametrize("cls", ("Batch", "Renderer"))
+def test_constructor_signatures_match_the_runtime(cls):
+    init = next(n for n in _stub_class(cls).body if isinstance(n, ast.FunctionDef) and n.name == "__init__")
+    assert _stub_params(init) == _runtime_params(getattr(_core, cls))

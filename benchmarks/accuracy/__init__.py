@@ -11,8 +11,8 @@ has a ``part`` field):
 2. ``backward``: the paper's Table 1 with our numbers: direct vs fixed_point vs krylov adjoint
    solves at eps 1e-2 ... 1e-9 on Wind and Slope; time, stage shares, fail %, speedup, gradient
    error against direct; the paper's numbers beside ours.
-3. ``gradient``: the gradient error caused by the forward tolerance (with and without the
-   recording polish) against the gradient of a converged trajectory (Hat, Sock, Wind 24x24).
+3. ``gradient``: the gradient error caused by the forward tolerance (each tolerance, and
+   the gradient solver preset) against the gradient of a converged trajectory (Hat, Sock, Wind 24x24).
 4. ``timestep``: error and time against the time step h for a fixed simulated duration.
 
 Writes ``accuracy_time.{json,md}`` and PNG plots (``accuracy_*.png``) to ``benchmarks/results``

@@ -12,7 +12,7 @@ import numpy as np
 
 from benchmarks.accuracy.common import (
     Scene,
-    default_record_tolerance,
+    gradient_tolerance,
     initial_velocities,
     make_sim,
     no_minor_labels,
@@ -65,10 +65,9 @@ TABLE1_CAVEATS = (
 
 
 def record_for_backward(scene: Scene) -> tuple[Simulator, np.ndarray]:
-    """Records a rollout at the default forward settings (Anderson 1e-8, recorded steps polished
-    to the default record_tolerance) from seeded random velocities, and a controller-style loss: seeded random linear
+    """Records a rollout at the gradient solver preset (Anderson, tolerance 1e-11) from seeded random velocities, and a controller-style loss: seeded random linear
     weights on the positions of every step (as scripts/bench_backward.py)."""
-    sim = make_sim(scene.config)
+    sim = make_sim(scene.config, preset="gradient")
     sim.set_recording(True)
     sim.reset(v=initial_velocities(sim, scene.v_sigma or 0.1))
     for _ in range(scene.steps):
@@ -223,7 +222,7 @@ def plot_backward(rows: list[dict], out_dir: Path) -> list[str]:
 
 def backward_section(rows: list[dict]) -> list[str]:
     out = ["## 2. Backward: paper Table 1 with our numbers", "",
-           f"One recorded rollout per scene at the default forward settings (Anderson 1e-8, recorded steps to {default_record_tolerance():.0e}; seeded "
+           f"One recorded rollout per scene at the gradient solver preset (Anderson, tolerance {gradient_tolerance():.0e}, as the default's polished recorded steps before; seeded "
            "random initial velocities, sigma 0.1 m/s), a controller-style loss (random linear weights on every step's "
            f"positions), adjoint iteration cap {BACKWARD_MAX_ITERATIONS}. `ms/step` = the backward's stage profile summed "
            "(inside Rust); speedup = direct ms / ms in the same run; fail % = steps whose iterative solve stalled, diverged "

@@ -48,9 +48,11 @@ def garment_scene(name: str, steps: int, contact: bool = False, drive: Any = GAR
     return Scene(label, cfg if contact else contact_free(cfg), steps, drive)
 
 
-def default_record_tolerance() -> float:
-    """The simulator's default ``solver.record_tolerance`` (the polish of recorded steps)."""
-    return Simulator.from_config("napkin").solver()["record_tolerance"]
+def gradient_tolerance() -> float:
+    """The tolerance of the simulator's ``gradient`` solver preset (what recorded steps need)."""
+    sim = Simulator.from_config("napkin")
+    sim.set_solver(preset="gradient")
+    return sim.solver()["tolerance"]
 
 
 def make_sim(cfg: dict, **solver: Any) -> Simulator:

@@ -8,13 +8,12 @@ from typing import Callable
 
 import numpy as np
 
-from benchmarks.accuracy.common import Scene, default_record_tolerance, make_sim, pyplot, save_plot, table, undisturbed
+from benchmarks.accuracy.common import Scene, gradient_tolerance, make_sim, pyplot, save_plot, table, undisturbed
 from benchmarks.measures import compare
 
 #: Gradient part: the converged trajectory the gradients are compared with (as
 #: tests/test_gradient_consistency.py).
-GRADIENT_REFERENCE = dict(acceleration="anderson", tolerance=1e-12, max_iterations=5000,
-                          record_tolerance=1e-12, record_max_iterations=5000)
+GRADIENT_REFERENCE = dict(acceleration="anderson", tolerance=1e-12, max_iterations=5000)
 #: Per-step effector motion of the gradient part (as tests/test_gradient_consistency.py).
 GRADIENT_DRIVE_PER_STEP = np.array([0.0, -0.003, 0.002])
 #: The reference C++ code's Hat gradient (w.r.t. v0, 400 steps, exact LU backward, no clipping)
@@ -23,13 +22,12 @@ CPP_HAT_GRADIENT_ERROR = {1e-8: 1.7e10, 1e-6: 3e83, 1e-4: 6e129}
 
 
 def gradient_settings(full: bool) -> list[tuple[str, dict]]:
-    """(label, set_solver kwargs) of the gradient part. Without polish the recorded steps stop
-    where an unrecorded step would (record_tolerance = tolerance, same cap); with polish they
-    converge to the default record_tolerance whatever the tolerance (so all polished rows share one trajectory: two
-    tolerances are run to show it). Caps have no polished variant: tolerance 0 would make the
-    recorded steps run to record_max_iterations."""
+    """(label, set_solver kwargs) of the gradient part. Recorded steps converge like every
+    other step (one trajectory whether recorded or not): each row is one tolerance or cap, and
+    the last is the ``gradient`` solver preset (what ``polish`` meant when recorded steps were
+    converged further than plain ones: the column name is kept for the committed results)."""
     def loose(accel: str, tol: float, cap: int) -> dict:
-        return dict(acceleration=accel, tolerance=tol, max_iterations=cap, record_tolerance=tol, record_max_iterations=cap)
+        return dict(acceleration=accel, tolerance=tol, max_iterations=cap)
 
     tols = (1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10) if full else (1e-4, 1e-6, 1e-8, 1e-10)
     caps = (20, 50, 100) if full else (50,)
@@ -38,9 +36,9 @@ def gradient_settings(full: bool) -> list[tuple[str, dict]]:
     if full:
         # Plain PD without polish: the reference C++ code's algorithm and regime.
         out += [(f"plain {t:.0e}, no polish", loose("none", t, 2000)) for t in (1e-6, 1e-8)]
-    rt = default_record_tolerance()
-    out += [(f"AA {t:.0e}, polish {rt:.0e}", dict(acceleration="anderson", tolerance=t, max_iterations=300,
-                                                  record_tolerance=rt, record_max_iterations=2000)) for t in ((1e-4, 1e-8) if full else (1e-8,))]
+    rt = gradient_tolerance()
+    out += [(f"AA {rt:.0e}, preset gradient", dict(acceleration="anderson", tolerance=rt, max_iterations=2000,
+                                                   polish=True))]
     return out
 
 
@@ -48,7 +46,7 @@ def gradient_run(scene: Scene, solver: dict) -> dict:
     """Records the scene's rollout (seeded random v0, effectors driven as in
     tests/test_gradient_consistency.py), takes a smooth-L1 loss to a target shape on every
     step and returns the direct-backward gradients plus the forward cost while recording."""
-    sim = make_sim(scene.config, **solver)
+    sim = make_sim(scene.config, **{k: v for k, v in solver.items() if k != "polish"})
     sim.set_recording(True)
 
     def record() -> tuple[list[np.ndarray], dict, int]:
@@ -86,7 +84,7 @@ def gradient_row(scene: Scene, label: str, solver: dict, run: dict, ref: dict) -
     prof, steps = run["prof"], scene.steps
     v_rel, v_cos = compare(run["v0"], ref["v0"])
     t_rel, t_cos = compare(run["targets"], ref["targets"])
-    polish = solver["record_tolerance"] < solver["tolerance"]
+    polish = bool(solver.get("polish"))
     return {
         "part": "gradient",
         "scene": scene.label,
@@ -95,11 +93,9 @@ def gradient_row(scene: Scene, label: str, solver: dict, run: dict, ref: dict) -
         "acceleration": solver["acceleration"],
         "tolerance": solver["tolerance"],
         "max_iterations": solver["max_iterations"],
-        "record_tolerance": solver["record_tolerance"],
         "polish": polish,
         "fwd_ms_per_step": 1e3 * prof["total_s"] / steps,
         "iters_per_step": prof["iterations"] / steps,
-        "polish_iters_per_step": prof["polish_iterations"] / steps,
         "unconverged_pct": 100.0 * run["unconverged"] / steps,
         "v0_rel_err": v_rel,
         "v0_cos": v_cos,
@@ -140,14 +136,15 @@ def gradient_section(rows: list[dict]) -> list[str]:
     out = ["## 3. Gradient error caused by the forward tolerance", "",
            "Rollout from seeded random velocities (sigma 0.2 m/s) with the effectors moving (0, -0.003, 0.002) m per step "
            "and a smooth-L1 loss to a target shape on every step (as tests/test_gradient_consistency.py); gradients by the "
-           "direct (LU) backward, compared with the gradient of a trajectory converged to 1e-12. `no polish`: recorded "
-           "steps stop where unrecorded ones would (record_tolerance = tolerance, same cap); `polish`: the default, "
-           f"recorded steps converge to {default_record_tolerance():.0e} (so the polished trajectory does not depend on the tolerance). `fwd ms/step` "
-           "is measured while recording, polish included (iterations/step is the noise-free cost). `warned` = the "
+           "direct (LU) backward, compared with the gradient of a trajectory converged to 1e-12. Recorded steps converge "
+           "like unrecorded ones (one trajectory whether recorded or not); `no polish` rows stop at the setting shown, "
+           f"`polish` is the `gradient` solver preset (tolerance {gradient_tolerance():.0e}, cap 2000). Results committed before "
+           "the retirement of `record_tolerance` show `polish` rows at two plain tolerances with recorded steps converged to "
+           "1e-11: the same trajectory as the preset. `fwd ms/step` is measured while recording. `warned` = the "
            "backward's `warnings` was non-empty.", "",
            "Reading: without polish the error is not monotone in the tolerance: the adjoint linearizes each step at an "
            "unconverged state (where M + h^2 Hess W need not be positive definite) and 400 steps compound it, most where the "
-           f"rollout is sensitive (see part 1). With polish every tolerance records the same {default_record_tolerance():.0e} trajectory; its remaining "
+           "rollout is sensitive (see part 1). The preset's remaining "
            "error against 1e-12 is the scene's own sensitivity to the per-step residual.", ""]
     hat = next((s for s in dict.fromkeys(r["scene"] for r in rows) if s.startswith("hat")), None)
     if hat:
@@ -167,10 +164,10 @@ def gradient_section(rows: list[dict]) -> list[str]:
             cpp.append({"tolerance": tol, "reference C++ (plain PD, no polish)": cpp_err,
                         "ours plain, no polish": err(lambda r: r["acceleration"] == "none" and r["tolerance"] == tol and not r["polish"]),
                         "ours AA, no polish": err(lambda r: r["acceleration"] == "anderson" and r["tolerance"] == tol and not r["polish"]),
-                        f"ours AA, polish {default_record_tolerance():.0e}": err(lambda r: r["tolerance"] == tol and r["polish"])})
+                        f"ours AA, preset gradient {gradient_tolerance():.0e}": err(lambda r: r["polish"])})
         out += [f"### {hat}: dL/dv0 relative error beside the reference C++ code's (400 steps, exact LU, no clipping; its gradients "
                 "are only usable clipped)", "", table(cpp, list(cpp[0].keys())), ""]
-    cols = ["scene", "steps", "setting", "fwd_ms_per_step", "iters_per_step", "polish_iters_per_step", "unconverged_pct", "v0_rel_err",
+    cols = ["scene", "steps", "setting", "fwd_ms_per_step", "iters_per_step", "unconverged_pct", "v0_rel_err",
             "v0_cos", "targets_rel_err", "targets_cos", "v0_grad_norm", "warned", "bwd_ms_per_step"]
     out += ["### All settings", "", table(rows, cols), "", "![gradient](accuracy_gradient.png)", ""]
     return out

@@ -180,6 +180,7 @@ def case_fast_end_effectors(size: str, workdir: Path) -> dict:
     fast_end = len(path)
     path += [stretched + offset] * hold
     mon = Monitor(energy=False)
+    sim.set_solver(preset="gradient")  # recorded for backward: converged as the adjoint needs
     sim.set_recording(True)
     seen: dict[str, Any] = {"fast_max": -math.inf}
 
@@ -216,6 +217,7 @@ def case_sphere_friction(size: str, workdir: Path, mu: float) -> dict:
     rows = pick(size, 15, 25)
     steps = pick(size, 540, 1080)
     sim = Simulator.from_config(sphere_config(mu, rows))
+    sim.set_solver(preset="gradient")  # recorded for backward: converged as the adjoint needs
     sim.set_recording(True)
     mon = Monitor(energy=True)
     laws: list[dict] = []
@@ -262,6 +264,7 @@ def case_slope_stick_slip(size: str, workdir: Path) -> dict:
     sweep = []
     for mu in mus:
         sim = Simulator.from_config(slope_config(mu, rows))
+        sim.set_solver(preset="gradient")  # recorded for backward: converged as the adjoint needs
         sim.set_recording(True)
         x0 = sim.positions
         n = sim.num_nodes
@@ -292,6 +295,7 @@ def _crumple(size: str, shape: str, rows: int, width: float, radius: float, drop
     squared distance to the obstacle's lowest point), Krylov backward through all the contacts.
     Contacts of both kinds must occur."""
     sim = Simulator.from_config(crumple_config(shape, rows, width, radius, drop, turn_deg))
+    sim.set_solver(preset="gradient")  # recorded for backward: converged as the adjoint needs
     sim.set_recording(True)
     bottom = np.array([0.0, 0.0, 0.0])
     mon = Monitor(energy=True)
@@ -395,6 +399,7 @@ def case_obj_sliver(size: str, workdir: Path, aspect: float, expect: str) -> dic
     area = 0.5 * np.linalg.norm(np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]]), axis=1)
     worst_aspect = float(np.min(2 * area / np.max(e, axis=0) ** 2))  # height / longest edge
     steps = pick(size, 100, 300)
+    sim.set_solver(preset="gradient")  # recorded for backward: converged as the adjoint needs
     sim.set_recording(True)
     dl_dx = run(sim, mon, steps, loss_grad=lambda s: 2 * s.positions / (s.num_nodes * steps))
     backward(sim, mon, dl_dx)
@@ -423,6 +428,7 @@ def case_sticking_contact_loop(size: str, workdir: Path) -> dict:
     v = np.zeros((6, 3))
     v[:3, 0], v[3:, 0], v[:, 1] = 1.0, -1.0, -0.1
     sim.reset(v=v)
+    sim.set_solver(preset="gradient")  # recorded for backward: converged as the adjoint needs
     sim.set_recording(True)
     mon = Monitor(energy=True)
     laws: list[dict] = []

@@ -3,10 +3,11 @@
 
 use crate::errors::{InputError, ParameterError};
 use diffcloth::{
-    Branch, Contact, ContactKind, Gradients, Param, ParamValue, Profile, StepStats, Vec3,
+    AdjointSolver, BackwardOptions, Branch, Contact, ContactKind, Gradients, Param, ParamValue,
+    Profile, StepStats, Vec3,
 };
-use numpy::ndarray::Array2;
-use numpy::{Element, PyArray2, PyReadonlyArray2, PyReadonlyArray3, ToPyArray};
+use numpy::ndarray::{Array2, Array3};
+use numpy::{Element, PyArray2, PyArray3, PyReadonlyArray2, PyReadonlyArray3, ToPyArray};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -145,29 +146,33 @@ pub(crate) fn gradients_dict<'py>(py: Python<'py>, g: &Gradients) -> PyResult<Bo
     let d = PyDict::new(py);
     d.set_item("x0", nodes_to_py(py, &g.x0))?;
     d.set_item("v0", nodes_to_py(py, &g.v0))?;
-    let per_step = |rows: &Vec<Vec<Vec3>>| -> Vec<Bound<'py, PyArray2<f64>>> {
-        rows.iter().map(|r| nodes_to_py(py, r)).collect()
-    };
-    d.set_item("attachment_targets", per_step(&g.attachment_targets))?;
-    d.set_item("external_forces", per_step(&g.external_forces))?;
+    d.set_item("attachment_targets", steps_to_py(py, &g.attachment_targets))?;
+    d.set_item("external_forces", steps_to_py(py, &g.external_forces))?;
     for name in Param::ALL {
         if let Some(value) = g.param(name) {
             set_param_item(&d, name, value)?;
         }
     }
-    d.set_item("mu_obstacles", g.mu_obstacles.clone())?;
-    d.set_item("mu_self", g.mu_self)?;
+    let per_step = |v: Vec<f64>| v.to_pyarray(py);
     d.set_item(
         "iterations",
-        g.steps.iter().map(|s| s.iterations).collect::<Vec<_>>(),
+        g.steps
+            .iter()
+            .map(|s| s.iterations as i64)
+            .collect::<Vec<_>>()
+            .to_pyarray(py),
     )?;
     d.set_item(
         "fell_back",
-        g.steps.iter().map(|s| s.fell_back).collect::<Vec<_>>(),
+        g.steps
+            .iter()
+            .map(|s| s.fell_back)
+            .collect::<Vec<_>>()
+            .to_pyarray(py),
     )?;
     d.set_item(
         "residual",
-        g.steps.iter().map(|s| s.residual).collect::<Vec<_>>(),
+        per_step(g.steps.iter().map(|s| s.residual).collect()),
     )?;
     let prof = PyDict::new(py);
     prof.set_item("dp_s", g.profile.dp.as_secs_f64())?;
@@ -179,7 +184,22 @@ pub(crate) fn gradients_dict<'py>(py: Python<'py>, g: &Gradients) -> PyResult<Bo
     Ok(d)
 }
 
-/// `d[name] = value`: a float, or a list of 3 for vector parameters.
+/// Per-step nodes as one (steps, k, 3) float64 array (k = 0 where a step has none: the
+/// effect is off).
+pub(crate) fn steps_to_py<'py>(py: Python<'py>, rows: &[Vec<Vec3>]) -> Bound<'py, PyArray3<f64>> {
+    let k = rows.iter().map(Vec::len).max().unwrap_or(0);
+    let mut flat = Vec::with_capacity(rows.len() * k * 3);
+    for r in rows {
+        // Steps without entries (none recorded for this input) are zero rows.
+        flat.extend(r.iter().flat_map(|p| [p.x, p.y, p.z]));
+        flat.extend(std::iter::repeat_n(0.0, (k - r.len()) * 3));
+    }
+    Array3::from_shape_vec((rows.len(), k, 3), flat)
+        .expect("rows padded to k")
+        .to_pyarray(py)
+}
+
+/// `d[name] = value`: a float, a list of 3 for vector parameters, a list per obstacle.
 pub(crate) fn set_param_item(
     d: &Bound<'_, PyDict>,
     name: Param,
@@ -188,6 +208,7 @@ pub(crate) fn set_param_item(
     match value {
         ParamValue::Scalar(x) => d.set_item(name.name(), x),
         ParamValue::Vector(v) => d.set_item(name.name(), v.as_slice().to_vec()),
+        ParamValue::List(v) => d.set_item(name.name(), v),
     }
 }
 
@@ -208,5 +229,33 @@ pub(crate) fn f64_arg(name: &str, value: &Bound<'_, PyAny>) -> PyResult<f64> {
     value.extract::<f64>().map_err(|_| {
         let shown = value.repr().map_or_else(|_| "?".into(), |r| r.to_string());
         ParameterError::new_err(format!("{name} must be a number, got {shown}"))
+    })
+}
+
+/// Adjoint options from the binding's keyword arguments (None: the core's defaults).
+pub(crate) fn backward_options(
+    solver: Option<&str>,
+    tolerance: Option<f64>,
+    max_iterations: Option<&Bound<'_, PyAny>>,
+) -> PyResult<BackwardOptions> {
+    let defaults = BackwardOptions::default();
+    let solver = match solver {
+        None => defaults.solver,
+        Some("direct") => AdjointSolver::Direct,
+        Some("krylov") => AdjointSolver::Krylov,
+        Some("fixed_point") => AdjointSolver::FixedPoint,
+        Some(other) => {
+            return Err(ParameterError::new_err(format!(
+                "solver must be \"direct\", \"krylov\" or \"fixed_point\", got {other:?}"
+            )))
+        }
+    };
+    Ok(BackwardOptions {
+        solver,
+        tolerance: tolerance.unwrap_or(defaults.tolerance),
+        max_iterations: max_iterations
+            .map(|m| usize_arg("max_iterations", m))
+            .transpose()?
+            .unwrap_or(defaults.max_iterations),
     })
 }

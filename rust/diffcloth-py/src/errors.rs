@@ -14,6 +14,7 @@ pyo3::import_exception!(diffcloth_gym.errors, InputError);
 pyo3::import_exception!(diffcloth_gym.errors, ParameterError);
 pyo3::import_exception!(diffcloth_gym.errors, SolverError);
 pyo3::import_exception!(diffcloth_gym.errors, DivergedError);
+pyo3::import_exception!(diffcloth_gym.errors, ContactError);
 pyo3::import_exception!(diffcloth_gym.errors, UnsupportedError);
 pyo3::import_exception!(diffcloth_gym.errors, InternalError);
 
@@ -30,7 +31,10 @@ pub(crate) fn to_py_err(err: Error) -> PyErr {
         Error::Param(_) => ParameterError::new_err(message),
         Error::Solver(_) => SolverError::new_err(message),
         Error::Diverged(_) => DivergedError::new_err(message),
+        Error::Contact(_) => ContactError::new_err(message),
         Error::Unsupported(_) => UnsupportedError::new_err(message),
+        // Only reached when a cancellation had no exception of its own to re-raise.
+        Error::Cancelled(_) => pyo3::exceptions::PyKeyboardInterrupt::new_err(message),
         // `Error` is non_exhaustive: a variant added later still reaches the base class.
         _ => DiffClothError::new_err(message),
     }

@@ -2,22 +2,23 @@
 //! runs the core through `guarded` (GIL released, panics caught) and converts the result.
 
 use crate::conv::{
-    contacts_dict, f64_arg, gradients_dict, nodes_to_py, pairs_to_py, profile_dict, read_nodes,
-    read_steps, set_param_item, stats_dict, triangles_to_py, usize_arg,
+    backward_options, contacts_dict, f64_arg, gradients_dict, nodes_to_py, pairs_to_py,
+    profile_dict, read_nodes, read_steps, set_param_item, stats_dict, triangles_to_py, usize_arg,
 };
 use crate::errors::{guarded, InputError, ParameterError};
 use diffcloth::{
-    Acceleration, AdjointSolver, BackwardOptions, Param, ParamValue, Params, SceneConfig,
-    Simulator, SolverSettings, StepInput, StepStats, Vec3,
+    Acceleration, Cancel, Param, ParamKind, ParamValue, Preset, SceneConfig, Simulator,
+    SolverSettings, StepInput, StepStats, Vec3,
 };
 use numpy::{PyArray2, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::Path;
+use std::sync::Mutex;
 
 #[pyclass(name = "Simulator", module = "diffcloth_gym._core")]
 pub(crate) struct PySimulator {
-    inner: Simulator,
+    pub(crate) inner: Simulator,
 }
 
 #[pymethods]
@@ -134,19 +135,22 @@ impl PySimulator {
         self.inner.num_nodes()
     }
 
+    /// Every physical parameter by its registry name (`mu_self` only with self-collision).
     fn params<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let p = self.inner.params();
         let d = PyDict::new(py);
         for name in Param::ALL {
-            set_param_item(&d, name, p.get(name))?;
+            if let Some(value) = self.inner.param(name) {
+                set_param_item(&d, name, value)?;
+            }
         }
         Ok(d)
     }
 
-    /// Updates physical parameters by name; unknown names and bad values raise.
+    /// Updates physical parameters by name (friction coefficients included); unknown names
+    /// and bad values raise and change nothing.
     #[pyo3(signature = (**kwargs))]
     fn set_params(&mut self, py: Python<'_>, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<()> {
-        let mut p: Params = self.inner.params().clone();
+        let mut values = Vec::new();
         if let Some(kwargs) = kwargs {
             for (key, value) in kwargs.iter() {
                 let key: String = key.extract()?;
@@ -156,23 +160,21 @@ impl PySimulator {
                         Param::names()
                     ))
                 })?;
-                let value =
-                    if name.is_vector() {
-                        let a: [f64; 3] = value.extract().map_err(|_| {
-                            ParameterError::new_err(format!("{key} must be 3 numbers"))
-                        })?;
+                let bad =
+                    || ParameterError::new_err(format!("{key} must be {}", name.kind().what()));
+                let value = match name.kind() {
+                    ParamKind::Vector => {
+                        let a: [f64; 3] = value.extract().map_err(|_| bad())?;
                         ParamValue::Vector(Vec3::from(a))
-                    } else {
-                        ParamValue::Scalar(value.extract().map_err(|_| {
-                            ParameterError::new_err(format!("{key} must be a number"))
-                        })?)
-                    };
-                p.set(name, value)
-                    .map_err(|e| ParameterError::new_err(e.to_string()))?;
+                    }
+                    ParamKind::List => ParamValue::List(value.extract().map_err(|_| bad())?),
+                    ParamKind::Scalar => ParamValue::Scalar(value.extract().map_err(|_| bad())?),
+                };
+                values.push((name, value));
             }
         }
         let sim = &mut self.inner;
-        guarded(py, || sim.set_params(p))
+        guarded(py, || sim.set_param_values(&values))
     }
 
     fn solver<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
@@ -183,24 +185,41 @@ impl PySimulator {
         d.set_item("acceleration", s.acceleration.name())?;
         d.set_item("history", s.history)?;
         d.set_item("parallel", s.parallel)?;
-        d.set_item("record_tolerance", s.record_tolerance)?;
-        d.set_item("record_max_iterations", s.record_max_iterations)?;
         Ok(d)
     }
 
-    /// Updates solver settings by name (max_iterations, tolerance, acceleration, history, parallel).
+    /// Updates solver settings by name (preset, max_iterations, tolerance, acceleration,
+    /// history, parallel). A preset is applied first, explicit settings over it. Recorded and
+    /// plain steps share every setting: the retired `record_tolerance` and
+    /// `record_max_iterations` are accepted only equal to `tolerance` and `max_iterations`.
     #[pyo3(signature = (**kwargs))]
     fn set_solver(&mut self, py: Python<'_>, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<()> {
         let mut s: SolverSettings = self.inner.solver().clone();
+        let mut retired: Vec<(String, f64)> = Vec::new();
         if let Some(kwargs) = kwargs {
+            let preset_names = || Preset::ALL.map(|p| format!("{:?}", p.name())).join(" or ");
+            if let Some(value) = kwargs.get_item("preset")? {
+                let name: String = value.extract().map_err(|_| {
+                    ParameterError::new_err(format!("preset must be {}", preset_names()))
+                })?;
+                let preset = Preset::from_name(&name).ok_or_else(|| {
+                    ParameterError::new_err(format!(
+                        "preset must be {}, got {name:?}",
+                        preset_names()
+                    ))
+                })?;
+                preset.apply(&mut s);
+            }
             for (key, value) in kwargs.iter() {
                 let key: String = key.extract()?;
                 let bad = |what: &str| ParameterError::new_err(format!("{key} must be {what}"));
                 match key.as_str() {
+                    "preset" => {}
                     "max_iterations" => s.max_iterations = value.extract().map_err(|_| bad("a positive integer"))?,
                     "tolerance" => s.tolerance = value.extract().map_err(|_| bad("a number"))?,
-                    "record_tolerance" => s.record_tolerance = value.extract().map_err(|_| bad("a number"))?,
-                    "record_max_iterations" => s.record_max_iterations = value.extract().map_err(|_| bad("a positive integer"))?,
+                    "record_tolerance" | "record_max_iterations" => {
+                        retired.push((key.clone(), value.extract().map_err(|_| bad("a number"))?))
+                    }
                     "history" => s.history = value.extract().map_err(|_| bad("an integer"))?,
                     "parallel" => s.parallel = value.extract().map_err(|_| bad("a bool"))?,
                     "acceleration" => {
@@ -210,11 +229,25 @@ impl PySimulator {
                     }
                     other => {
                         return Err(ParameterError::new_err(format!(
-                            "unknown solver setting {other:?}; known: max_iterations, tolerance, record_tolerance, \
-                             record_max_iterations, acceleration, history, parallel"
+                            "unknown solver setting {other:?}; known: preset, max_iterations, tolerance, \
+                             acceleration, history, parallel"
                         )))
                     }
                 }
+            }
+        }
+        for (key, value) in retired {
+            let (shared, current) = if key == "record_tolerance" {
+                ("tolerance", s.tolerance)
+            } else {
+                ("max_iterations", s.max_iterations as f64)
+            };
+            if value != current {
+                return Err(ParameterError::new_err(format!(
+                    "{key} is retired: recorded steps converge like every other step (one \
+                     trajectory whether recorded or not); set {shared} (now {current:e}), or \
+                     preset=\"gradient\" for gradient work"
+                )));
             }
         }
         let sim = &mut self.inner;
@@ -239,6 +272,12 @@ impl PySimulator {
     /// 2 slip), impulse (k, 3) on node_a in N s.
     fn contacts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         contacts_dict(py, self.inner.contacts())
+    }
+
+    /// A message if the current state has nodes inside an obstacle or self-contact pairs
+    /// closer than the radius (the first step throws them out), else None.
+    fn overlap_warning(&self) -> Option<String> {
+        self.inner.overlap_warning()
     }
 
     /// Signed distance of every node to obstacle `index` at the current time, shape (n,).
@@ -323,30 +362,27 @@ impl PySimulator {
         tolerance: Option<f64>,
         max_iterations: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let max_iterations = max_iterations
-            .map(|m| usize_arg("max_iterations", m))
-            .transpose()?;
-        let defaults = BackwardOptions::default();
-        let solver = match solver {
-            None => defaults.solver,
-            Some("direct") => AdjointSolver::Direct,
-            Some("krylov") => AdjointSolver::Krylov,
-            Some("fixed_point") => AdjointSolver::FixedPoint,
-            Some(other) => {
-                return Err(ParameterError::new_err(format!(
-                    "solver must be \"direct\", \"krylov\" or \"fixed_point\", got {other:?}"
-                )))
-            }
-        };
+        let options = backward_options(solver, tolerance, max_iterations)?;
         let (gx, gv) = (read_steps("dl_dx", dl_dx)?, read_steps("dl_dv", dl_dv)?);
         let sim = &mut self.inner;
-        let options = BackwardOptions {
-            solver,
-            tolerance: tolerance.unwrap_or(defaults.tolerance),
-            max_iterations: max_iterations.unwrap_or(defaults.max_iterations),
+        // Ctrl-C: the core polls this check (at most every 50 ms, between and inside adjoint
+        // solves); it takes the GIL back for a moment and keeps the signal handler's exception
+        // (KeyboardInterrupt, or whatever a custom handler raised) to re-raise as it was.
+        let interrupt: Mutex<Option<PyErr>> = Mutex::new(None);
+        let check = || match Python::attach(|py| py.check_signals()) {
+            Ok(()) => false,
+            Err(e) => {
+                *interrupt.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
+                true
+            }
         };
-        let g = guarded(py, || sim.backward(&gx, &gv, &options))?;
-        gradients_dict(py, &g)
+        let result = guarded(py, || {
+            sim.backward_cancellable(&gx, &gv, &options, &Cancel::new(&check))
+        });
+        if let Some(e) = interrupt.into_inner().unwrap_or_else(|p| p.into_inner()) {
+            return Err(e);
+        }
+        gradients_dict(py, &result?)
     }
 
     /// Records (on) or stops recording (off) the PD convergence trace of each step.

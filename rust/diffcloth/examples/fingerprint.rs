@@ -39,8 +39,8 @@ fn main() {
             }
             let p = sim.profile();
             let mut line = format!(
-                "{name} recorded={recorded}: it {} polish {} escape {} rejections {} stalls {} redetect {} contacts {}/{}/{} x {trajectory:016x}",
-                p.iterations, p.polish_iterations, p.escape_steps, p.acceleration_rejections,
+                "{name} recorded={recorded}: it {} escape {} rejections {} stalls {} redetect {} contacts {}/{}/{} x {trajectory:016x}",
+                p.iterations, p.escape_steps, p.acceleration_rejections,
                 p.acceleration_stalls, p.redetections, p.contacts_take_off, p.contacts_stick,
                 p.contacts_slip
             );

@@ -332,13 +332,15 @@ impl SceneConfig {
             path: path.display().to_string(),
             message: e.to_string(),
         })?;
-        let mut cfg: Self =
-            toml::from_str(&text).map_err(|e| Error::Config(format!("{}: {e}", path.display())))?;
+        let mut cfg: Self = Self::from_toml_str(&text)
+            .map_err(|e| Error::Config(format!("{}: {e}", path.display())))?;
         cfg.resolve_paths(path.parent().unwrap_or(Path::new(".")));
         Ok(cfg)
     }
 
     pub fn from_toml_str(text: &str) -> Result<Self> {
+        // A byte-order mark (some Windows editors write one) is not part of TOML.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         toml::from_str(text).map_err(|e| Error::Config(e.to_string()))
     }
 

@@ -157,9 +157,11 @@ impl ContactSet {
         self.contacts.clear();
         let friction = |mu: f64| if settings.friction { mu } else { 0.0 };
         for (o, obstacle) in obstacles.iter().enumerate() {
-            // The obstacle's placement and velocity are evaluated once per step.
-            let (offset, velocity) = obstacle.motion.at(t);
-            let obstacle_reach = settings.thickness + settings.margin + 2.0 * h * velocity.norm();
+            // The obstacle's placement and velocity are evaluated once per step. Its reach
+            // covers its travel over the step (a path may start moving inside the step).
+            let (offset, end, velocity) = obstacle.motion.over_step(t, h);
+            let travel = (h * velocity.norm()).max((end - offset).norm());
+            let obstacle_reach = settings.thickness + settings.margin + 2.0 * travel;
             for (j, (p, vj)) in x.iter().zip(v).enumerate() {
                 let reach = obstacle_reach + 2.0 * h * vj.norm();
                 let contacts = &mut self.contacts;

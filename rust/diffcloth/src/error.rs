@@ -26,9 +26,17 @@ pub enum Error {
     /// A feature that is not available for this input yet (the message says which).
     #[error("not supported: {0}")]
     Unsupported(String),
+    /// Contact could not be resolved (a node keeps crossing an obstacle); the step was
+    /// rolled back.
+    #[error("contact failed: {0}")]
+    Contact(String),
     /// The state became non-finite; the step was rolled back.
     #[error("simulation diverged: {0}")]
     Diverged(String),
+    /// The caller's cancellation check asked the call to stop (see [`crate::Cancel`]); the
+    /// message names the stage. Nothing the call would have changed was changed.
+    #[error("cancelled during {0}")]
+    Cancelled(String),
 }
 
 pub type Result<T> = std::result::Result<T, Error>;

@@ -6,6 +6,8 @@
 
 pub mod anderson;
 pub mod backward;
+pub mod batch;
+pub mod cancel;
 pub mod collision;
 pub mod config;
 pub mod contact;
@@ -25,12 +27,14 @@ pub mod tape;
 /// 3-vectors are nalgebra's (node positions, velocities, forces).
 pub type Vec3 = nalgebra::Vector3<f64>;
 
-pub use backward::{AdjointSolver, BackwardOptions, Gradients};
+pub use backward::{AdjointSolver, AdjointWarmStart, BackwardOptions, Gradients};
+pub use batch::{Batch, MemberInput};
+pub use cancel::Cancel;
 pub use config::{BendModel, Effect, SceneConfig};
 pub use contact::{Branch, BranchCounts, Contact, ContactKind};
 pub use error::{Error, Result};
-pub use forward::{Model, Simulator, StepInput, StepStats};
-pub use params::{Acceleration, Param, ParamValue, Params, SolverSettings};
+pub use forward::{Model, Overlaps, Simulator, StepInput, StepStats};
+pub use params::{Acceleration, Param, ParamKind, ParamValue, Params, Preset, SolverSettings};
 pub use profile::Profile;
 
 /// Use one thread inside faer: its parallel sparse kernels are slower than sequential at cloth

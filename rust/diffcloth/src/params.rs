@@ -28,7 +28,9 @@ pub struct Params {
 }
 
 /// The physical parameters by name: the one table the binding (`params`, `set_params`),
-/// `diffcloth_gym.torch` (through `_core.PARAM_NAMES`) and the gradients all use.
+/// `diffcloth_gym.torch` (through `_core.PARAM_NAMES`) and the gradients all use. The friction
+/// coefficients belong to the obstacles and the self-collision set, not to [`Params`]; the
+/// simulator's `param` / `set_param_values` reach them by the same names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Param {
     H,
@@ -40,17 +42,30 @@ pub enum Param {
     WindDirection,
     WindOmega,
     WindPhi,
+    /// Coulomb friction coefficient of each obstacle, in config order (a list).
+    MuObstacles,
+    /// Coulomb friction coefficient of self-contact (scenes with self-collision).
+    MuSelf,
 }
 
-/// A parameter's value: a scalar or a 3-vector.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// A parameter's value: a scalar, a 3-vector, or one number per obstacle.
+#[derive(Debug, Clone, PartialEq)]
 pub enum ParamValue {
     Scalar(f64),
     Vector(Vec3),
+    List(Vec<f64>),
+}
+
+/// What kind of value a parameter takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ParamKind {
+    Scalar,
+    Vector,
+    List,
 }
 
 impl Param {
-    pub const ALL: [Param; 9] = [
+    pub const ALL: [Param; 11] = [
         Param::H,
         Param::Density,
         Param::KStretch,
@@ -60,6 +75,8 @@ impl Param {
         Param::WindDirection,
         Param::WindOmega,
         Param::WindPhi,
+        Param::MuObstacles,
+        Param::MuSelf,
     ];
 
     pub fn name(self) -> &'static str {
@@ -73,6 +90,8 @@ impl Param {
             Param::WindDirection => "wind_direction",
             Param::WindOmega => "wind_omega",
             Param::WindPhi => "wind_phi",
+            Param::MuObstacles => "mu_obstacles",
+            Param::MuSelf => "mu_self",
         }
     }
 
@@ -80,8 +99,21 @@ impl Param {
         Self::ALL.into_iter().find(|p| p.name() == name)
     }
 
+    pub fn kind(self) -> ParamKind {
+        match self {
+            Param::Gravity | Param::WindDirection => ParamKind::Vector,
+            Param::MuObstacles => ParamKind::List,
+            _ => ParamKind::Scalar,
+        }
+    }
+
     pub fn is_vector(self) -> bool {
-        matches!(self, Param::Gravity | Param::WindDirection)
+        self.kind() == ParamKind::Vector
+    }
+
+    /// Whether the parameter lives in [`Params`] (the friction coefficients do not).
+    pub fn in_params(self) -> bool {
+        !matches!(self, Param::MuObstacles | Param::MuSelf)
     }
 
     /// Whether backward gives its gradient (not the time step: it sets the discretization).
@@ -96,9 +128,10 @@ impl Param {
 }
 
 impl Params {
-    pub fn get(&self, p: Param) -> ParamValue {
+    /// A parameter held by `Params` (None for the friction coefficients: see [`Param`]).
+    pub fn get(&self, p: Param) -> Option<ParamValue> {
         use ParamValue::{Scalar, Vector};
-        match p {
+        Some(match p {
             Param::H => Scalar(self.h),
             Param::Density => Scalar(self.density),
             Param::KStretch => Scalar(self.k_stretch),
@@ -108,16 +141,17 @@ impl Params {
             Param::WindDirection => Vector(self.wind_direction),
             Param::WindOmega => Scalar(self.wind_omega),
             Param::WindPhi => Scalar(self.wind_phi),
-        }
+            Param::MuObstacles | Param::MuSelf => return None,
+        })
     }
 
-    /// Sets one parameter (not validated: see [`validate_params`]); a value of the wrong kind
-    /// is an error naming the parameter.
+    /// Sets one parameter (not validated: see [`validate_params`]); a value of the wrong kind,
+    /// or a friction coefficient (set through the simulator), is an error naming the parameter.
     pub fn set(&mut self, p: Param, value: ParamValue) -> Result<()> {
         match (p, value) {
             (Param::Gravity, ParamValue::Vector(v)) => self.gravity = v,
             (Param::WindDirection, ParamValue::Vector(v)) => self.wind_direction = v,
-            (_, ParamValue::Scalar(x)) if !p.is_vector() => {
+            (_, ParamValue::Scalar(x)) if p.kind() == ParamKind::Scalar && p.in_params() => {
                 *match p {
                     Param::H => &mut self.h,
                     Param::Density => &mut self.density,
@@ -128,16 +162,32 @@ impl Params {
                     _ => &mut self.wind_phi,
                 } = x
             }
+            _ if !p.in_params() => {
+                return Err(Error::Param(format!(
+                    "{} is not held by Params (set it through the simulator)",
+                    p.name()
+                )))
+            }
             _ => {
-                let kind = if p.is_vector() {
-                    "3 numbers"
-                } else {
-                    "a number"
-                };
-                return Err(Error::Param(format!("{} must be {kind}", p.name())));
+                return Err(Error::Param(format!(
+                    "{} must be {}",
+                    p.name(),
+                    p.kind().what()
+                )))
             }
         }
         Ok(())
+    }
+}
+
+impl ParamKind {
+    /// What a value of this kind is, for error messages.
+    pub fn what(self) -> &'static str {
+        match self {
+            ParamKind::Scalar => "a number",
+            ParamKind::Vector => "3 numbers",
+            ParamKind::List => "one number per obstacle",
+        }
     }
 }
 
@@ -172,80 +222,154 @@ impl Acceleration {
 /// that needs more iterations than this is not going to converge anyway.
 pub const MAX_ITERATIONS: usize = 1_000_000;
 
+/// A named set of accuracy knobs (`solver.preset` in a config, `set_solver(preset=...)`):
+/// the tolerance and iteration cap of *every* step, recorded for backward or not, so a loss
+/// and its gradient always come from one trajectory. Explicit settings override the preset's.
+///
+/// Costs measured by `python -m benchmarks accuracy` (benchmarks/results/accuracy_time.md,
+/// Anderson, one thread):
+/// - `Simulation` (tolerance 1e-8, cap 300; the default): Hat with contact 16 ms/step,
+///   trajectory error 7e-4 against a 1e-12 run; contact-free Hat 3.2 ms/step. Gradients taken
+///   from such steps are 0.3-6 % off on the contact-free Hat (400 steps) and 50 % off on
+///   Wind 24x24, so `backward` warns (its steps are above [`crate::backward::TRUSTED_FORWARD_RESIDUAL`]).
+/// - `Gradient` (tolerance 1e-11, cap 2000): contact-free Hat 7.2 ms/step (2.3x), gradients
+///   within 2e-5 of the converged ones (Wind 24x24, which
+///   has no bending and amplifies per-step differences: 3e-3); the contact Hat's 400-step gradients agree with a
+///   1e-12 rollout to 3e-3 (at 1e-10 its trajectory parts from the converged one at the
+///   buckling against the head, gradients 0.56 apart). The backward pass is unchanged
+///   (contact-free Hat: 2.7 ms/step Krylov at eps 1e-6, 32 ms/step direct), so a loss with its
+///   gradient costs 1.1x (direct) to 1.7x (Krylov) what it costs at `Simulation`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Preset {
+    #[default]
+    Simulation,
+    Gradient,
+}
+
+impl Preset {
+    pub const ALL: [Preset; 2] = [Preset::Simulation, Preset::Gradient];
+
+    /// The name used in configs and by the Python binding.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Simulation => "simulation",
+            Self::Gradient => "gradient",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|p| p.name() == name)
+    }
+
+    /// `(tolerance, max_iterations)` of the preset.
+    pub fn accuracy(self) -> (f64, usize) {
+        match self {
+            Self::Simulation => (1e-8, 300),
+            Self::Gradient => (1e-11, 2000),
+        }
+    }
+
+    /// Sets the knobs the preset decides (tolerance and iteration cap).
+    pub fn apply(self, s: &mut SolverSettings) {
+        (s.tolerance, s.max_iterations) = self.accuracy();
+    }
+}
+
 /// The accuracy knobs of the PD solve (`[solver]` in a scene config, `set_solver` at run
-/// time): their one home, with their defaults.
+/// time): their one home, with their defaults. Every step, recorded for backward or not,
+/// converges to the same `tolerance` within the same `max_iterations`: recording never
+/// changes the trajectory.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(try_from = "SolverTable")]
 pub struct SolverSettings {
-    /// Iteration cap per step (default 300; at most [`MAX_ITERATIONS`]).
-    #[serde(default = "default_max_iterations")]
+    /// Iteration cap per step (default 300, the `simulation` preset; at most [`MAX_ITERATIONS`]).
     pub max_iterations: usize,
     /// Stop when the RMS per-coordinate PD update `|G(x) - x|` falls below this, in metres
-    /// (default 1e-8). `G(x) - x = -P^{-1} grad E(x)`: a preconditioned gradient norm.
-    #[serde(default = "default_tolerance")]
+    /// (default 1e-8, the `simulation` preset; use the `gradient` preset, 1e-11, for steps
+    /// recorded for backward: see [`Preset`] for the measured costs).
+    /// `G(x) - x = -P^{-1} grad E(x)`: a preconditioned gradient norm.
     pub tolerance: f64,
-    /// Tolerance for steps recorded on a tape (default 1e-11): the adjoint linearizes each step
-    /// at its end state, which must be the converged implicit-Euler solution (at 1e-8 the Hat's
-    /// 400-step target gradients were 29 % off; at 1e-10, 0.04 %; Wind 24x24, which has no
-    /// bending and amplifies per-step differences, 0.9 % at 1e-10 and 0.3 % at 1e-11, for
-    /// about 10 % more time). Steps converge to
-    /// `min(tolerance, record_tolerance)` while recording; the extra iterations are counted as
-    /// polish in the profile.
-    #[serde(default = "default_record_tolerance")]
-    pub record_tolerance: f64,
-    /// Iteration cap of recorded steps (default 2000; the larger of this and max_iterations;
-    /// at most [`MAX_ITERATIONS`]).
-    #[serde(default = "default_record_max_iterations")]
-    pub record_max_iterations: usize,
     /// Acceleration of the local-global iterations (default: anderson).
-    #[serde(default)]
     pub acceleration: Acceleration,
     /// Anderson history length (default 5).
-    #[serde(default = "default_history")]
     pub history: usize,
     /// Parallel local step for large meshes (default true).
-    #[serde(default = "yes")]
     pub parallel: bool,
 }
 
 impl Default for SolverSettings {
     fn default() -> Self {
+        let (tolerance, max_iterations) = Preset::default().accuracy();
         Self {
-            max_iterations: default_max_iterations(),
-            tolerance: default_tolerance(),
-            record_tolerance: default_record_tolerance(),
-            record_max_iterations: default_record_max_iterations(),
+            max_iterations,
+            tolerance,
             acceleration: Acceleration::default(),
-            history: default_history(),
+            history: 5,
             parallel: true,
         }
     }
 }
 
-fn default_max_iterations() -> usize {
-    300
+/// `[solver]` as written in a config: an optional preset, then explicit settings over it.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SolverTable {
+    preset: Option<Preset>,
+    max_iterations: Option<usize>,
+    tolerance: Option<f64>,
+    acceleration: Option<Acceleration>,
+    history: Option<usize>,
+    parallel: Option<bool>,
+    /// Retired (recorded steps converge like the others): accepted only equal to `tolerance`.
+    record_tolerance: Option<f64>,
+    /// Retired: accepted only equal to `max_iterations`.
+    record_max_iterations: Option<usize>,
 }
-fn default_tolerance() -> f64 {
-    1e-8
-}
-fn default_record_max_iterations() -> usize {
-    2000
-}
-fn default_record_tolerance() -> f64 {
-    1e-11
-}
-fn default_history() -> usize {
-    5
-}
-fn yes() -> bool {
-    true
+
+impl TryFrom<SolverTable> for SolverSettings {
+    type Error = String;
+
+    fn try_from(t: SolverTable) -> std::result::Result<Self, String> {
+        let mut s = SolverSettings::default();
+        t.preset.unwrap_or_default().apply(&mut s);
+        s.max_iterations = t.max_iterations.unwrap_or(s.max_iterations);
+        s.tolerance = t.tolerance.unwrap_or(s.tolerance);
+        s.acceleration = t.acceleration.unwrap_or(s.acceleration);
+        s.history = t.history.unwrap_or(s.history);
+        s.parallel = t.parallel.unwrap_or(s.parallel);
+        let retired = [
+            (
+                "record_tolerance",
+                t.record_tolerance,
+                s.tolerance,
+                "tolerance",
+            ),
+            (
+                "record_max_iterations",
+                t.record_max_iterations.map(|m| m as f64),
+                s.max_iterations as f64,
+                "max_iterations",
+            ),
+        ];
+        for (key, value, current, shared) in retired {
+            if value.is_some_and(|v| v != current) {
+                return Err(format!(
+                    "{key} is retired: recorded steps converge like every other step (one \
+                     trajectory whether recorded or not); set {shared} (now {current:e}), or \
+                     preset = \"gradient\" for gradient work"
+                ));
+            }
+        }
+        Ok(s)
+    }
 }
 
 impl SolverSettings {
-    /// Iterations a step can take (recorded steps may take more), plus the first: the length
-    /// of a full trace. Bounded by the validation's [`MAX_ITERATIONS`].
+    /// Iterations a step can take, plus the first: the length of a full trace. Bounded by
+    /// the validation's [`MAX_ITERATIONS`].
     pub(crate) fn trace_capacity(&self) -> usize {
-        self.max_iterations.max(self.record_max_iterations) + 1
+        self.max_iterations + 1
     }
 }
 
@@ -313,15 +437,11 @@ pub(crate) fn validate_params(p: &Params) -> Result<()> {
 }
 
 pub(crate) fn validate_solver(s: &SolverSettings) -> Result<()> {
-    for (name, cap) in [
-        ("max_iterations", s.max_iterations),
-        ("record_max_iterations", s.record_max_iterations),
-    ] {
-        if cap > MAX_ITERATIONS {
-            return Err(Error::Param(format!(
-                "solver {name} must be at most {MAX_ITERATIONS}, got {cap}"
-            )));
-        }
+    if s.max_iterations > MAX_ITERATIONS {
+        return Err(Error::Param(format!(
+            "solver max_iterations must be at most {MAX_ITERATIONS}, got {}",
+            s.max_iterations
+        )));
     }
     if s.max_iterations == 0 {
         return Err(Error::Param(
@@ -332,12 +452,6 @@ pub(crate) fn validate_solver(s: &SolverSettings) -> Result<()> {
         return Err(Error::Param(format!(
             "solver tolerance must be non-negative and finite, got {}",
             s.tolerance
-        )));
-    }
-    if !(s.record_tolerance >= 0.0 && s.record_tolerance.is_finite()) {
-        return Err(Error::Param(format!(
-            "solver record_tolerance must be non-negative and finite, got {}",
-            s.record_tolerance
         )));
     }
     if !(1..=crate::anderson::MAX_HISTORY).contains(&s.history) {
@@ -375,20 +489,43 @@ mod tests {
         let mut p = sample();
         for (i, name) in Param::ALL.into_iter().enumerate() {
             assert_eq!(Param::from_name(name.name()), Some(name));
+            if !name.in_params() {
+                assert_eq!(p.get(name), None);
+                assert!(p.set(name, ParamValue::Scalar(0.1)).is_err());
+                continue;
+            }
             let value = if name.is_vector() {
                 ParamValue::Vector(Vec3::repeat(i as f64 + 0.5))
             } else {
                 ParamValue::Scalar(i as f64 + 0.5)
             };
-            p.set(name, value).unwrap();
-            assert_eq!(p.get(name), value);
+            p.set(name, value.clone()).unwrap();
+            assert_eq!(p.get(name), Some(value));
         }
         // All fields changed: none is left at its sample value.
         let s = sample();
-        assert!(Param::ALL.into_iter().all(|n| p.get(n) != s.get(n)));
+        assert!(Param::ALL
+            .into_iter()
+            .filter(|n| n.in_params())
+            .all(|n| p.get(n) != s.get(n)));
         assert!(p.set(Param::Gravity, ParamValue::Scalar(1.0)).is_err());
         assert!(p.set(Param::H, ParamValue::Vector(Vec3::zeros())).is_err());
         assert_eq!(Param::from_name("mu"), None);
+    }
+
+    /// `[solver]`: a preset first, explicit settings over it; the retired record settings
+    /// only when they change nothing (recording never changes the trajectory).
+    #[test]
+    fn solver_tables_apply_presets_and_refuse_a_separate_record_tolerance() {
+        let parse = |t: &str| toml::from_str::<SolverSettings>(t);
+        let s = parse("preset = \"gradient\"\nmax_iterations = 900").unwrap();
+        assert_eq!((s.tolerance, s.max_iterations), (1e-11, 900));
+        assert_eq!(parse("").unwrap(), SolverSettings::default());
+        let same = parse("tolerance = 1e-9\nrecord_tolerance = 1e-9\nrecord_max_iterations = 300");
+        assert_eq!(same.unwrap().tolerance, 1e-9);
+        let err = parse("record_tolerance = 1e-11").unwrap_err().to_string();
+        assert!(err.contains("record_tolerance is retired"), "{err}");
+        assert!(parse("preset = \"fast\"").is_err());
     }
 
     /// Iteration caps size the trace: a cap beyond MAX_ITERATIONS is refused by name.
@@ -402,7 +539,7 @@ mod tests {
                 ..ok.clone()
             },
             SolverSettings {
-                record_max_iterations: usize::MAX,
+                max_iterations: usize::MAX,
                 ..ok.clone()
             },
         ] {

@@ -11,8 +11,6 @@ pub struct Profile {
     pub iterations: u64,
     /// Steps that stopped at the iteration cap before reaching the tolerance.
     pub unconverged_steps: u64,
-    /// Iterations spent converging recorded steps beyond the user tolerance (for gradients).
-    pub polish_iterations: u64,
     /// Accelerated iterates rejected by the energy guard (the plain PD step was taken).
     pub acceleration_rejections: u64,
     /// Contact steps whose residual-guarded acceleration stalled and finished with plain PD.
@@ -57,7 +55,6 @@ impl Profile {
             ),
             ("acceleration_stalls", self.acceleration_stalls as f64),
             ("escape_steps", self.escape_steps as f64),
-            ("polish_iterations", self.polish_iterations as f64),
             ("refactorizations", self.refactorizations as f64),
             ("redetections", self.redetections as f64),
             ("local_s", self.local.as_secs_f64()),

@@ -64,6 +64,22 @@ pub fn build_mesh(cfg: &SceneConfig) -> Result<PlacedMesh> {
     placed
         .mesh
         .transform(p.scale, &rotation, Vec3::from(p.translate));
+    // The mesh was validated as loaded; placement can still ruin it (a huge scale overflows
+    // the areas, a huge translation rounds a triangle's corners together), so validate again.
+    placed.mesh = TriMesh::new(
+        std::mem::take(&mut placed.mesh.positions),
+        std::mem::take(&mut placed.mesh.triangles),
+    )
+    .map_err(|e| {
+        Error::Config(format!(
+            "placement (scale = {:e}, rotate_deg = {:?}, translate = {:?}) makes the mesh unusable: {}",
+            p.scale, p.rotate_deg, p.translate,
+            match e {
+                Error::Mesh(m) => m,
+                other => other.to_string(),
+            }
+        ))
+    })?;
     Ok(placed)
 }
 

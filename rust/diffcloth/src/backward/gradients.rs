@@ -38,9 +38,20 @@ pub struct Gradients {
 }
 
 impl Gradients {
+    /// Zero gradients for a tape of `steps` steps and `obstacles` obstacles.
+    pub(super) fn zeros(steps: usize, obstacles: usize) -> Self {
+        Self {
+            mu_obstacles: vec![0.0; obstacles],
+            attachment_targets: vec![Vec::new(); steps],
+            external_forces: vec![Vec::new(); steps],
+            steps: vec![AdjointStepStats::default(); steps],
+            ..Default::default()
+        }
+    }
+
     /// The gradient with respect to a parameter, by the shared name table (None for `h`).
     pub fn param(&self, p: Param) -> Option<ParamValue> {
-        use ParamValue::{Scalar, Vector};
+        use ParamValue::{List, Scalar, Vector};
         Some(match p {
             Param::H => return None,
             Param::Density => Scalar(self.density),
@@ -51,6 +62,8 @@ impl Gradients {
             Param::WindDirection => Vector(self.wind_direction),
             Param::WindOmega => Scalar(self.wind_omega),
             Param::WindPhi => Scalar(self.wind_phi),
+            Param::MuObstacles => List(self.mu_obstacles.clone()),
+            Param::MuSelf => Scalar(self.mu_self),
         })
     }
 }

@@ -12,8 +12,10 @@ mod gradients;
 mod operator;
 mod replay;
 mod solvers;
+mod step_vjp;
 
 pub use gradients::Gradients;
+pub use step_vjp::AdjointWarmStart;
 
 use std::time::Duration;
 

@@ -4,9 +4,8 @@
 use super::contact::{linearize_contacts, ContactCoupling};
 use super::operator::{AdjointOperator, Linearization};
 use super::solvers::SolveWork;
-use super::{
-    AdjointSolver, AdjointStepStats, BackwardOptions, Gradients, TRUSTED_FORWARD_RESIDUAL,
-};
+use super::{AdjointSolver, BackwardOptions, Gradients, TRUSTED_FORWARD_RESIDUAL};
+use crate::cancel::Cancel;
 use crate::error::{Error, Result};
 use crate::forward::Simulator;
 use crate::tape::{StepRecord, Tape};
@@ -38,6 +37,21 @@ impl Simulator {
         dl_dv: &[Vec<Vec3>],
         options: &BackwardOptions,
     ) -> Result<Gradients> {
+        self.backward_cancellable(dl_dx, dl_dv, options, &Cancel::never())
+    }
+
+    /// [`Simulator::backward`] that stops with [`Error::Cancelled`] when `cancel` says so. It
+    /// is polled before each replayed step, each re-simulated step of a checkpointed tape and
+    /// in every iteration of the CG and fixed-point adjoint solves (not inside one BiCGStab or
+    /// direct solve, which are faer's: they bound the latency to one step's solve). A
+    /// cancelled backward leaves this simulator as untouched as a finished one.
+    pub fn backward_cancellable(
+        &self,
+        dl_dx: &[Vec<Vec3>],
+        dl_dv: &[Vec<Vec3>],
+        options: &BackwardOptions,
+        cancel: &Cancel<'_>,
+    ) -> Result<Gradients> {
         let start = Instant::now();
         let rec = self.recording().ok_or_else(|| {
             Error::Input("no tape: call set_recording(true) before the rollout".into())
@@ -53,7 +67,7 @@ impl Simulator {
         }
         let mut replay = Simulator::from_model(rec.model.clone(), rec.solver.clone());
         let result = if let Tape::Checkpointed { .. } = tape {
-            replay.backward_checkpointed(tape, dl_dx, dl_dv, options)
+            replay.backward_checkpointed(tape, dl_dx, dl_dv, options, cancel)
         } else {
             replay.backward_segments(
                 tape,
@@ -61,6 +75,7 @@ impl Simulator {
                 dl_dx,
                 dl_dv,
                 options,
+                cancel,
                 None,
                 &mut None,
             )
@@ -81,6 +96,7 @@ impl Simulator {
         dl_dx: &[Vec<Vec3>],
         dl_dv: &[Vec<Vec3>],
         options: &BackwardOptions,
+        cancel: &Cancel<'_>,
     ) -> Result<Gradients> {
         let Tape::Checkpointed {
             checkpoints,
@@ -94,7 +110,7 @@ impl Simulator {
         let mut state: Option<Resume> = None;
         for (s, cp) in checkpoints.iter().enumerate().rev() {
             let end = checkpoints.get(s + 1).map_or(steps, |c| c.step);
-            let records = self.resimulate(cp, &inputs[cp.step..end])?;
+            let records = self.resimulate(cp, &inputs[cp.step..end], cancel)?;
             let mut carry = None;
             let g = self.backward_segments(
                 tape,
@@ -102,6 +118,7 @@ impl Simulator {
                 dl_dx,
                 dl_dv,
                 options,
+                cancel,
                 state.take(),
                 &mut carry,
             )?;
@@ -121,11 +138,13 @@ impl Simulator {
         &mut self,
         cp: &crate::tape::Checkpoint,
         inputs: &[crate::tape::StepInputs],
+        cancel: &Cancel<'_>,
     ) -> Result<Vec<StepRecord>> {
         self.set_recording(true);
         self.reset(Some(&cp.x), Some(&cp.v))?;
         self.set_time(cp.time)?;
         for input in inputs {
+            cancel.checkpoint("backward (re-simulating a checkpointed segment)")?;
             self.step(crate::forward::StepInput {
                 attachment_targets: input.targets.as_deref(),
                 external_forces: input.forces.as_deref(),
@@ -146,6 +165,7 @@ impl Simulator {
         dl_dx: &[Vec<Vec3>],
         dl_dv: &[Vec<Vec3>],
         options: &BackwardOptions,
+        cancel: &Cancel<'_>,
         resume: Option<Resume>,
         carry_out: &mut Option<(Vec<Vec3>, Vec<Vec3>, Vec<Vec3>, Option<Vec<Vec3>>)>,
     ) -> Result<Gradients> {
@@ -160,13 +180,7 @@ impl Simulator {
             mut z,
             z_previous,
         } = resume.unwrap_or_else(|| Resume {
-            grads: Gradients {
-                mu_obstacles: vec![0.0; self.obstacles().len()],
-                attachment_targets: vec![Vec::new(); steps],
-                external_forces: vec![Vec::new(); steps],
-                steps: vec![AdjointStepStats::default(); steps],
-                ..Default::default()
-            },
+            grads: Gradients::zeros(steps, self.obstacles().len()),
             carry_x: vec![Vec3::zeros(); n],
             carry_v: vec![Vec3::zeros(); n],
             z: vec![Vec3::zeros(); n],
@@ -182,10 +196,11 @@ impl Simulator {
             coupling: ContactCoupling::default(),
             contact_scratch: Mutex::default(),
         };
-        let mut work = SolveWork::new(self.factor(), &op);
+        let mut work = SolveWork::new(self.factor(), &op, cancel);
         for &(first, records) in segments.iter().rev() {
             for (offset, rec) in records.iter().enumerate().rev() {
                 let k = first + offset;
+                cancel.checkpoint("backward")?;
                 // The loss gradient on this step's output plus what later steps sent back.
                 let mut a_v = vec![Vec3::zeros(); n];
                 for i in 0..n {
@@ -241,8 +256,9 @@ impl Simulator {
             let first = grads.loose_steps.iter().map(|&(k, _)| k).min().unwrap_or(0);
             grads.warnings.push(format!(
                 "{} of {steps} recorded steps stopped above the residual {TRUSTED_FORWARD_RESIDUAL:e} (worst {worst:.1e}, first at step {first}): \
-                 the adjoint linearizes unconverged steps and the gradient may be inaccurate; lower \
-                 solver.record_tolerance or raise record_max_iterations",
+                 the adjoint linearizes unconverged steps and the gradient may be inaccurate; record \
+                 with solver preset \"gradient\" (tolerance 1e-11, max_iterations 2000) or a lower \
+                 solver.tolerance",
                 grads.loose_steps.len()
             ));
         }
@@ -278,6 +294,11 @@ fn validate(
             }
         }
     }
+    validate_options(options)
+}
+
+/// Checks the adjoint solver options.
+pub(super) fn validate_options(options: &BackwardOptions) -> Result<()> {
     if !(options.tolerance > 0.0 && options.tolerance.is_finite()) || options.max_iterations == 0 {
         return Err(Error::Param(
             "backward tolerance must be positive and max_iterations at least 1".into(),

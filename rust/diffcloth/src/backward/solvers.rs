@@ -4,6 +4,7 @@
 
 use super::operator::{col_to_nodes, nodes_to_col, AdjointOperator, PdPreconditioner};
 use super::{AdjointSolver, AdjointStepStats, BackwardOptions};
+use crate::cancel::Cancel;
 use crate::error::{Error, Result};
 use crate::forward::Simulator;
 use crate::linalg::SpdFactor;
@@ -41,6 +42,8 @@ impl Attempt {
 /// Work space of the iterative adjoint solves, allocated once per backward pass.
 pub(super) struct SolveWork<'a> {
     pub(super) precond: PdPreconditioner<'a>,
+    /// Polled once per iteration of the hand-written solves (rate-limited by `Cancel`).
+    pub(super) cancel: &'a Cancel<'a>,
     /// faer's BiCGStab scratch.
     pub(super) stack: MemBuffer,
     /// Node vectors of PCG and the fixed-point iteration, and the P-solve's work rows.
@@ -52,7 +55,11 @@ pub(super) struct SolveWork<'a> {
 }
 
 impl<'a> SolveWork<'a> {
-    pub(super) fn new(factor: &'a SpdFactor, op: &AdjointOperator<'_>) -> Self {
+    pub(super) fn new(
+        factor: &'a SpdFactor,
+        op: &AdjointOperator<'_>,
+        cancel: &'a Cancel<'a>,
+    ) -> Self {
         let precond = PdPreconditioner::new(factor);
         let n = factor.dim();
         let stack = MemBuffer::new(bicgstab_scratch(
@@ -65,6 +72,7 @@ impl<'a> SolveWork<'a> {
         let zeros = vec![Vec3::zeros(); n];
         Self {
             precond,
+            cancel,
             stack,
             r: zeros.clone(),
             s: zeros.clone(),
@@ -110,6 +118,10 @@ impl Simulator {
             AdjointSolver::FixedPoint => Some(self.fixed_point(op, g, z, options, work)),
             AdjointSolver::Krylov => Some(self.krylov(op, g, z, options, work)),
         };
+        // A solve stopped by the cancellation is not a failed one: no direct fallback.
+        if work.cancel.was_cancelled() {
+            return Err(Error::Cancelled("backward (adjoint solve)".into()));
+        }
         if let Some(Attempt {
             iterations,
             converged: true,
@@ -148,7 +160,14 @@ impl Simulator {
         work: &mut SolveWork<'_>,
     ) -> Attempt {
         let g_norm = norm(g);
-        let SolveWork { r, s, ap, y, .. } = work;
+        let SolveWork {
+            r,
+            s,
+            ap,
+            y,
+            cancel,
+            ..
+        } = work;
         // Warm start from the previous step's adjoint (kept in z), unless it is unusable.
         if !z.iter().all(|v| v.iter().all(|c| c.is_finite())) {
             z.iter_mut().for_each(|v| *v = Vec3::zeros());
@@ -156,6 +175,9 @@ impl Simulator {
         let mut previous = f64::INFINITY;
         let mut growing = 0;
         for it in 0..=options.max_iterations {
+            if cancel.poll() {
+                return Attempt::failed(it);
+            }
             op.apply_nodes(z, ap);
             let residual = g
                 .iter()
@@ -248,7 +270,15 @@ impl Simulator {
         options: &BackwardOptions,
         work: &mut SolveWork<'_>,
     ) -> std::result::Result<Attempt, usize> {
-        let SolveWork { r, s, p, ap, y, .. } = work;
+        let SolveWork {
+            r,
+            s,
+            p,
+            ap,
+            y,
+            cancel,
+            ..
+        } = work;
         let threshold = options.tolerance * norm(g);
         op.apply_nodes(z, ap);
         for ((ri, gi), ai) in r.iter_mut().zip(g).zip(ap.iter()) {
@@ -261,6 +291,9 @@ impl Simulator {
         p.copy_from_slice(s);
         let mut rs = dot(r, s);
         for it in 1..=options.max_iterations {
+            if cancel.poll() {
+                return Ok(Attempt::failed(it));
+            }
             op.apply_nodes(p, ap);
             let curvature = dot(p, ap);
             let positive = curvature.is_finite() && curvature > 0.0;

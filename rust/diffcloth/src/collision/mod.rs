@@ -4,6 +4,7 @@
 mod obstacle;
 mod self_collision;
 mod shape;
+mod sweep;
 
 pub use obstacle::{Motion, Obstacle};
 pub use self_collision::{HashScratch, SelfCollision};

@@ -36,6 +36,18 @@ impl Motion {
             }
         }
     }
+
+    /// The placement at the start `t` and end `t + h` of a step and the velocity contacts use
+    /// over it. A path's velocity is its mean over the step: at a key inside the step (a path
+    /// that starts moving at `t`) the velocity at `t` alone would call a rising obstacle still.
+    pub fn over_step(&self, t: f64, h: f64) -> (Vec3, Vec3, Vec3) {
+        let (start, velocity) = self.at(t);
+        let (end, _) = self.at(t + h);
+        match self {
+            Motion::Static | Motion::Linear { .. } => (start, end, velocity),
+            Motion::Path(_) => (start, end, (end - start) / h),
+        }
+    }
 }
 
 #[derive(Debug, Clone)]

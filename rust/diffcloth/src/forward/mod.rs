@@ -22,12 +22,15 @@ use std::sync::Arc;
 mod detection;
 mod diagnostics;
 mod model;
+mod overlap;
 mod pd;
+mod registry;
 mod safeguards;
 mod state;
 mod step;
 
 pub use model::Model;
+pub use overlap::Overlaps;
 
 /// What one forward step did.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -57,6 +60,9 @@ pub struct Simulator {
     recording: Option<Recording>,
     profile: Profile,
     last: StepStats,
+    /// The last completed step's contacts: the workspace's are overwritten by a step that
+    /// then fails, and `contacts()` must agree with `last_step()` after a rollback.
+    last_contacts: Vec<Contact>,
 }
 
 /// What changes every step: positions, velocities, time and the attachment targets.
@@ -160,6 +166,7 @@ impl Simulator {
             recording: None,
             profile: Profile::default(),
             last: StepStats::default(),
+            last_contacts: Vec::new(),
         }
     }
 
@@ -277,7 +284,7 @@ impl Simulator {
     }
     /// The current step's contacts (frames, branches and impulses of the last step).
     pub fn contacts(&self) -> &[Contact] {
-        &self.work.contacts.contacts
+        &self.last_contacts
     }
     pub fn obstacles(&self) -> &[Obstacle] {
         &self.model.obstacles

@@ -9,7 +9,7 @@ use crate::config::SceneConfig;
 use crate::contact::ContactSettings;
 use crate::effects::Effects;
 use crate::energy::{bending, Attachments, PdConstraints, Stiffness, Stretch};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::forces::Wind;
 use crate::linalg::SpdFactor;
 use crate::mesh::TriMesh;
@@ -58,6 +58,19 @@ impl Clone for Model {
             contact_settings: self.contact_settings.clone(),
             factor: self.factor.clone(),
         }
+    }
+}
+
+/// A scene whose system matrix cannot be factored is singular in floating point: the
+/// stiffness over the mass term, ~ k h^2 / (density edge^2), is beyond double precision.
+fn explain_singular(e: Error) -> Error {
+    match e {
+        Error::Solver(m) => Error::Solver(format!(
+            "{m}: the scene is numerically singular (stiffness x h^2 / (density x edge length^2) \
+             too large): a mesh scaled too small (placement.scale), a tiny h or density, or a huge \
+             stiffness"
+        )),
+        other => other,
     }
 }
 
@@ -116,7 +129,7 @@ impl Model {
             factor: SpdFactor::new(1, &[(0, 0, 1.0)])?,
             mesh,
         };
-        model.factor = SpdFactor::new(n, &model.system_triplets())?;
+        model.factor = SpdFactor::new(n, &model.system_triplets()).map_err(explain_singular)?;
         Ok(model)
     }
 

@@ -108,26 +108,16 @@ impl Simulator {
         if let Some(t) = self.trace.as_mut() {
             t.clear();
         }
-        // Recorded steps converge further: the adjoint needs the converged solution.
-        let recording = self.recording.is_some();
-        let user_tol = self.solver.tolerance;
-        let (tol, max_it) = if recording {
-            (
-                user_tol.min(self.solver.record_tolerance),
-                self.solver
-                    .max_iterations
-                    .max(self.solver.record_max_iterations),
-            )
-        } else {
-            (user_tol, self.solver.max_iterations)
-        };
+        // Recorded or not, every step converges to the same tolerance: recording never
+        // changes the trajectory (backward warns when the steps are too loose for it).
+        let (tol, max_it) = (self.solver.tolerance, self.solver.max_iterations);
         let energy = self.local_step(Buffer::Iterate);
         self.solve_contacts(Buffer::Iterate);
         let residual = self.global_step();
         self.record(energy, residual);
         let history = self.work.anderson.history();
         let accelerate = self.solver.acceleration == Acceleration::Anderson;
-        let mut p = Progress::new(energy, residual, user_tol, accelerate, history);
+        let mut p = Progress::new(energy, residual, accelerate, history);
         while p.residual > tol && p.iterations < max_it {
             // While no contact pushes (all take off at the iterate), E is the exact objective
             // and the energy guard applies; the residual guard only where contact forces act.
@@ -156,9 +146,6 @@ impl Simulator {
                 self.watch_stall(&mut p);
             }
             self.watch_saddle(&mut p, previous, accepted == Some(Accepted::Anderson));
-        }
-        if let Some(at) = p.reached_user_tol {
-            self.profile.polish_iterations += (p.iterations - at) as u64;
         }
         StepStats {
             iterations: p.iterations,

@@ -14,9 +14,6 @@ pub(super) struct Progress {
     pub(super) residual: f64,
     /// E at the accepted iterate.
     pub(super) energy: f64,
-    user_tol: f64,
-    /// The iteration that first reached the user tolerance (the rest is polish).
-    pub(super) reached_user_tol: Option<usize>,
     /// Saddle escape: consecutive growing plain updates, and the step scale (1: off).
     growing: usize,
     pub(super) escape_scale: f64,
@@ -29,19 +26,11 @@ pub(super) struct Progress {
 
 impl Progress {
     /// After the first (plain) iteration.
-    pub(super) fn new(
-        energy: f64,
-        residual: f64,
-        user_tol: f64,
-        accelerate: bool,
-        history: usize,
-    ) -> Self {
+    pub(super) fn new(energy: f64, residual: f64, accelerate: bool, history: usize) -> Self {
         Self {
             iterations: 1,
             residual,
             energy,
-            user_tol,
-            reached_user_tol: None,
             growing: 0,
             escape_scale: 1.0,
             accelerate,
@@ -55,9 +44,6 @@ impl Progress {
     pub(super) fn iterated(&mut self, residual: f64) {
         self.iterations += 1;
         self.residual = residual;
-        if self.reached_user_tol.is_none() && residual <= self.user_tol {
-            self.reached_user_tol = Some(self.iterations);
-        }
     }
 }
 

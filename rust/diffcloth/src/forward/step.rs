@@ -9,6 +9,10 @@ use crate::Vec3;
 use std::sync::Arc;
 use std::time::Instant;
 
+/// Re-detections of one step's contacts before the step is refused. Each covers every node
+/// whose crossing caused it; more than a couple means a step far too long for the scene.
+const MAX_REDETECTIONS: usize = 8;
+
 impl Simulator {
     /// Advances one implicit-Euler step. On error the state is unchanged.
     pub fn step(&mut self, input: StepInput<'_>) -> Result<StepStats> {
@@ -19,31 +23,34 @@ impl Simulator {
             self.detect_contacts(false);
         }
         let mut stats = self.solve_pd();
+        self.check_finite()?;
         // Detection reaches as far as each node's entering velocity carries it. A node that
-        // speeds up within the step (a snap-through) can end inside an obstacle it was never
-        // a candidate for (the Hat: 3.6 cm in one step, 9.8 mm deep in the head); then detect
-        // again with the step's own motion and solve the step once more.
-        if self.model.effects.obstacle_contact && self.missed_obstacle_contact() {
-            self.profile.redetections += 1;
-            self.detect_contacts(true);
-            stats = self.solve_pd();
+        // speeds up within the step (a snap-through; the Hat: 3.6 cm in one step, 9.8 mm deep
+        // in the head) or falls from rest in a long step (issue 11: 2.45 m through a sphere
+        // in 0.5 s) can cross an obstacle it was never a candidate for; then detect again
+        // with the step's own motion and solve the step once more. Each re-detection covers
+        // the crossing nodes for good, so this ends; past the cap the step is refused.
+        if self.model.effects.obstacle_contact {
+            let mut redetections = 0;
+            while let Some((node, obstacle)) = self.missed_obstacle_contact() {
+                if redetections == MAX_REDETECTIONS {
+                    self.roll_back_targets();
+                    return Err(Error::Contact(format!(
+                        "step {} refused: node {node} still crosses obstacle {obstacle} after \
+                         {MAX_REDETECTIONS} re-detections of the step's contacts; state left at \
+                         the previous step (a smaller time step h helps)",
+                        self.state.step_count
+                    )));
+                }
+                redetections += 1;
+                self.profile.redetections += 1;
+                self.detect_contacts(true);
+                stats = self.solve_pd();
+                self.check_finite()?;
+            }
         }
         // The PD result is in `mapped`.
         let h = self.model.params.h;
-        if !self
-            .work
-            .mapped
-            .iter()
-            .all(|p| p.iter().all(|c| c.is_finite()))
-        {
-            // Roll back everything the call set: the targets too, or the next plain step
-            // would diverge again.
-            std::mem::swap(&mut self.state.targets, &mut self.work.previous_targets);
-            return Err(Error::Diverged(format!(
-                "non-finite positions at step {}; state left at the previous step",
-                self.state.step_count
-            )));
-        }
         self.record_step(&input, &stats);
         let state = &mut self.state;
         for ((x, v), xn) in state
@@ -58,6 +65,7 @@ impl Simulator {
         self.state.time += h;
         self.state.step_count += 1;
         self.last = stats;
+        self.last_contacts.clone_from(&self.work.contacts.contacts);
         let p = &mut self.profile;
         p.steps += 1;
         p.iterations += stats.iterations as u64;
@@ -73,6 +81,31 @@ impl Simulator {
             + (p.contact_solve - p0.contact_solve);
         p.other += total.saturating_sub(staged);
         Ok(stats)
+    }
+
+    /// Fails the step if the solve (`mapped`) is not finite: a divergence, checked before
+    /// any crossing test (a non-finite path crosses nothing and everything).
+    fn check_finite(&mut self) -> Result<()> {
+        if self
+            .work
+            .mapped
+            .iter()
+            .all(|p| p.iter().all(|c| c.is_finite()))
+        {
+            return Ok(());
+        }
+        // Roll back everything the call set: the targets too, or the next plain step would
+        // diverge again.
+        self.roll_back_targets();
+        Err(Error::Diverged(format!(
+            "non-finite positions at step {}; state left at the previous step",
+            self.state.step_count
+        )))
+    }
+
+    /// Restores the targets in effect before this step's inputs (a failed step sets nothing).
+    fn roll_back_targets(&mut self) {
+        std::mem::swap(&mut self.state.targets, &mut self.work.previous_targets);
     }
 
     /// Validates the inputs and computes the inertial prediction

@@ -17,6 +17,11 @@ use std::collections::HashMap;
 /// 3e-7 and above stay stable; the reference meshes' smallest is 3e-2.
 pub const MIN_ASPECT: f64 = 1e-6;
 
+/// Largest accepted vertex coordinate magnitude in metres. Far beyond any cloth, and far
+/// enough below overflow that squared areas and their products stay finite (at 1e150 a
+/// triangle's normal overflows and its rest shape is lost).
+pub const MAX_COORDINATE: f64 = 1e15;
+
 #[derive(Debug, Clone)]
 pub struct TriMesh {
     pub positions: Vec<Vec3>,
@@ -26,7 +31,8 @@ pub struct TriMesh {
 impl TriMesh {
     /// Builds a mesh and validates it: finite positions, indices in range, no repeated vertex
     /// in a triangle, and no degenerate triangle (area below `1e-12` times the squared
-    /// bounding-box diagonal), so every triangle has a well-defined rest shape.
+    /// bounding-box diagonal), so every triangle has a well-defined rest shape, and every
+    /// vertex in some triangle (else it has no mass), no coordinate beyond [`MAX_COORDINATE`].
     pub fn new(positions: Vec<Vec3>, triangles: Vec<[usize; 3]>) -> Result<Self> {
         if positions.is_empty() {
             return Err(Error::Mesh("mesh has no vertices".into()));
@@ -42,10 +48,17 @@ impl TriMesh {
                 "vertex {i} has a non-finite coordinate"
             )));
         }
+        if let Some(i) = positions.iter().position(|p| p.amax() > MAX_COORDINATE) {
+            return Err(Error::Mesh(format!(
+                "vertex {i} is {:.1e} m from the origin, beyond the {MAX_COORDINATE:.0e} m allowed",
+                positions[i].amax()
+            )));
+        }
         let mesh = Self {
             positions,
             triangles,
         };
+        let mut used = vec![false; mesh.positions.len()];
         let diag2 = mesh.bounding_box_diagonal().powi(2);
         let n = mesh.positions.len();
         for (t, tri) in mesh.triangles.iter().enumerate() {
@@ -54,6 +67,7 @@ impl TriMesh {
                     "triangle {t} references vertex {i} but the mesh has {n} vertices"
                 )));
             }
+            tri.iter().for_each(|&i| used[i] = true);
             if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
                 return Err(Error::Mesh(format!(
                     "triangle {t} repeats a vertex: {tri:?}"
@@ -72,6 +86,12 @@ impl TriMesh {
                      its bending weights (cotangents, ~1/aspect) make the step unstable; remove it or repair the mesh"
                 )));
             }
+        }
+        // A vertex of no triangle has no mass: the system matrix would be singular.
+        if let Some(i) = used.iter().position(|&u| !u) {
+            return Err(Error::Mesh(format!(
+                "vertex {i} is used by no triangle (it would have no mass)"
+            )));
         }
         Ok(mesh)
     }

@@ -10,7 +10,9 @@ pub const MAX_OBJ_BYTES: u64 = 512 << 20;
 
 /// Reads an OBJ file's `v` and `f` records. Face entries may be `i`, `i/t`, `i//n` or `i/t/n`,
 /// with negative (relative) indices allowed; other records are ignored. Only a regular file
-/// of at most [`MAX_OBJ_BYTES`] is read.
+/// of at most [`MAX_OBJ_BYTES`] is read. A vertex no face uses is an error naming it (it
+/// would have no mass and make the system singular; dropping it silently would renumber the
+/// vertices after it, which `attachments.nodes` refer to).
 pub fn read_obj(path: &std::path::Path) -> Result<TriMesh> {
     let io = |message: String| Error::Io {
         path: path.display().to_string(),
@@ -37,7 +39,10 @@ pub fn read_obj(path: &std::path::Path) -> Result<TriMesh> {
 
 /// Parses OBJ text (see [`read_obj`]).
 pub fn parse_obj(text: &str) -> Result<TriMesh> {
+    // A UTF-8 byte-order mark (some Windows tools write one) would hide the first record.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut positions = Vec::new();
+    let mut vertex_lines = Vec::new();
     let mut triangles = Vec::new();
     for (lineno, line) in text.lines().enumerate() {
         let mut fields = line.split_whitespace();
@@ -55,6 +60,7 @@ pub fn parse_obj(text: &str) -> Result<TriMesh> {
                     )));
                 }
                 positions.push(Vec3::new(coords[0], coords[1], coords[2]));
+                vertex_lines.push(lineno + 1);
             }
             Some("f") => {
                 let mut face = Vec::with_capacity(4);
@@ -91,6 +97,24 @@ pub fn parse_obj(text: &str) -> Result<TriMesh> {
             }
             _ => {}
         }
+    }
+    // (An index out of range is reported first, by TriMesh::new.)
+    let mut used = vec![false; positions.len()];
+    let in_range = triangles.iter().flatten().all(|&i| i < used.len());
+    triangles.iter().flatten().for_each(|&i| {
+        if let Some(u) = used.get_mut(i) {
+            *u = true;
+        }
+    });
+    let unused: Vec<usize> = (0..used.len()).filter(|&i| in_range && !used[i]).collect();
+    if let Some(&first) = unused.first() {
+        return Err(Error::Mesh(format!(
+            "line {}: vertex {} is used by no face ({} unused vertices in all); it would have \
+             no mass: remove unused vertices from the file",
+            vertex_lines[first],
+            first + 1,
+            unused.len()
+        )));
     }
     TriMesh::new(positions, triangles)
 }
@@ -148,6 +172,20 @@ mod tests {
         let err = parse_obj(sliver).unwrap_err();
         assert!(err.to_string().contains("sliver"), "{err}");
         assert!(parse_obj(&sliver.replace("1e-7", "1e-5")).is_ok());
+    }
+
+    /// Issue 11: a BOM dropped the first vertex; an unused vertex failed later as "system
+    /// matrix is not positive definite".
+    #[test]
+    fn a_byte_order_mark_is_skipped_and_unused_vertices_are_named() {
+        let m = parse_obj("\u{feff}v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+        assert_eq!(m.num_vertices(), 3);
+        let err = parse_obj("v 0 0 0\nv 1 0 0\nv 9 9 9\nv 0 1 0\nf 1 2 4\n").unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("line 3: vertex 3 is used by no face"),
+            "{err}"
+        );
     }
 
     #[test]

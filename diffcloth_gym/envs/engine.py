@@ -1,0 +1,281 @@
+"""The plumbing every cloth env shares, batched: N members of one task on a Rust
+``_core.Batch`` (one shared model and factorization, stepped in parallel without the GIL).
+The single env is a batch of one and the vector envs are adapters over it, so a vector env's
+member i and a single env seeded alike run bitwise the same simulation.
+
+One accuracy rule: the solver's plain and recorded tolerances (and iteration caps) are set
+equal, so ``step`` and ``step_grad`` from the same state and action give the same next state;
+a gradient is a matter of recording the step, not of simulating it differently.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+
+from diffcloth_gym import _core
+from diffcloth_gym.envs.task import ClothTask, Start
+from diffcloth_gym.errors import InputError, ParameterError
+from diffcloth_gym.scenes import load_config
+from diffcloth_gym.simulator import Simulator
+
+#: Default PD tolerance of env steps (RMS update, scene units): below the residual the
+#: adjoint trusts (1e-9), so every step is gradient-grade.
+DEFAULT_TOLERANCE = 1e-10
+
+
+def build_scene(task_class: type[ClothTask], task_config: Mapping[str, Any],
+                solver: Mapping[str, Any] | None) -> dict:
+    """The task's scene config with its overrides and the env's solver settings applied."""
+    scene, _ = load_config(task_class.scene)
+    scene = copy.deepcopy(scene)
+    for table, values in task_class.scene_overrides(task_config).items():
+        scene.setdefault(table, {}).update(values)
+    settings = dict(scene.get("solver", {}))
+    settings.update(solver or {})
+    tol = settings.pop("tolerance", DEFAULT_TOLERANCE)
+    cap = max(settings.pop("max_iterations", 300), settings.pop("record_max_iterations", 2000))
+    settings.pop("record_tolerance", None)
+    settings.update(tolerance=tol, record_tolerance=tol, max_iterations=cap, record_max_iterations=cap)
+    scene["solver"] = settings
+    return scene
+
+
+def task_config(task_class: type[ClothTask], overrides: Mapping[str, Any]) -> dict:
+    """The task's default config updated with ``overrides``; unknown keys are refused."""
+    config = task_class.default_config()
+    unknown = sorted(set(overrides) - set(config))
+    if unknown:
+        raise ParameterError(f"unknown argument(s) {unknown} for {task_class.__name__}; "
+                             f"known: {sorted(config)}")
+    config.update(overrides)
+    return config
+
+
+@dataclass
+class StepResult:
+    """One batched step, as numpy (the vector adapters convert and forward it)."""
+
+    obs: np.ndarray
+    reward: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    infos: list[dict] = field(default_factory=list)
+
+
+class ClothEngine:
+    """``num_envs`` members of ``task_class``; see the module docstring."""
+
+    def __init__(self, task_class: type[ClothTask], num_envs: int = 1, solver: Mapping[str, Any] | None = None,
+                 **task_overrides: Any):
+        self.task_config = task_config(task_class, task_overrides)
+        self.scene = build_scene(task_class, self.task_config, solver)
+        self.template = Simulator.from_config(self.scene)
+        self.batch = _core.Batch(self.template._core, num_envs)
+        self.num_envs = num_envs
+        self.task = task_class(self.scene, self.template.rest_positions, self.template.attachment_nodes,
+                               self.task_config)
+        self.action_low = np.full(self.task.action_dim, -self.task.action_bound)
+        self.action_high = np.full(self.task.action_dim, self.task.action_bound)
+        n, k = self.template.num_nodes, len(self.template.attachment_nodes)
+        self._control = torch.zeros((num_envs, k, 3), dtype=torch.float64)
+        self._steps = np.zeros(num_envs, dtype=np.int64)
+        self._started = np.zeros(num_envs, dtype=bool)
+        # Per episode: None until its first step, then "step" or "step_grad" (no mixing).
+        self._mode: list[str | None] = [None] * num_envs
+        # step_grad's graph: the state tensors after the last step (with history).
+        self._x_t = torch.zeros((num_envs, n, 3), dtype=torch.float64)
+        self._v_t = torch.zeros_like(self._x_t)
+        self._episode = 0  # bumped at every reset, so a stale graph's backward is refused
+        self._recording = False
+
+    # -- episodes ------------------------------------------------------------------------------
+
+    def reset(self, indices: list[int], starts: list[Start]) -> np.ndarray:
+        """Starts members ``indices`` at ``starts``; returns their observations (len, obs_dim)."""
+        # A new episode starts a new graph: the control state of a step_grad episode is a
+        # graph node and must not be written into.
+        self._control = self._control.detach().clone()
+        for i, s in zip(indices, starts):
+            self.batch.reset(i, x=s.x, v=s.v)
+            self._control[i] = torch.as_tensor(s.control, dtype=torch.float64).reshape(-1, 3)
+            self._steps[i] = 0
+            self._started[i] = True
+            self._mode[i] = None
+        x = torch.from_numpy(self.batch.positions())
+        v = torch.from_numpy(self.batch.velocities())
+        self._x_t, self._v_t = x, v
+        self._episode += 1
+        idx = torch.as_tensor(indices, dtype=torch.long)
+        with torch.no_grad():
+            return self.task.observe(x[idx], v[idx], self._control[idx]).numpy()
+
+    def detach_graph(self) -> None:
+        """Cuts the differentiable episode's graph here: later steps still differentiate, but no
+        gradient flows back past this point (truncated backpropagation over windows)."""
+        self._x_t, self._v_t, self._control = self._x_t.detach(), self._v_t.detach(), self._control.detach()
+
+    def snapshot(self) -> dict[str, np.ndarray]:
+        """Every member's state, control and episode step (for checkpoints; see ``restore``)."""
+        return {"x": self.batch.positions(), "v": self.batch.velocities(),
+                "control": self._control.detach().numpy().copy(), "steps": self._steps.copy()}
+
+    def restore(self, snapshot: Mapping[str, np.ndarray]) -> np.ndarray:
+        """Puts every member back to a ``snapshot()`` (mid-episode included) for plain steps;
+        returns the observations."""
+        n = self.num_envs
+        obs = self.reset(list(range(n)), [Start(x=snapshot["x"][i], v=snapshot["v"][i],
+                                                control=snapshot["control"][i]) for i in range(n)])
+        self._steps[:] = snapshot["steps"]
+        return obs
+
+    def _claim(self, mode: str) -> None:
+        if not self._started.all():
+            raise InputError("call reset() before stepping")
+        for i, m in enumerate(self._mode):
+            if m is not None and m != mode:
+                other = "step_grad" if mode == "step" else "step"
+                raise InputError(f"env {i} began this episode with {other}(); an episode is stepped "
+                                 f"with step() or with step_grad(), not both: call reset() first")
+        if self._recording != (mode == "step_grad"):
+            self.batch.set_recording(mode == "step_grad")
+            self._recording = mode == "step_grad"
+        self._mode = [mode] * self.num_envs
+
+    def check_action(self, action: Any) -> tuple[np.ndarray, np.ndarray]:
+        """The action as (N, action_dim) float64 clipped to the bounds, and how many entries
+        per member were clipped. Wrong shape or non-finite values raise ``InputError``."""
+        try:
+            a = action.detach().cpu().numpy().astype(np.float64) if isinstance(action, torch.Tensor) \
+                else np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError) as e:
+            raise InputError(f"action must be an array of numbers: {e}") from None
+        expected = (self.num_envs, self.task.action_dim)
+        if a.shape != expected and not (self.num_envs == 1 and a.shape == expected[1:]):
+            raise InputError(f"action must have shape {expected[1:] if self.num_envs == 1 else expected}, "
+                             f"got {a.shape}")
+        a = a.reshape(expected)
+        if not np.isfinite(a).all():
+            raise InputError("action contains NaN or inf")
+        clipped = np.clip(a, self.action_low, self.action_high)
+        return clipped, (clipped != a).sum(axis=1)
+
+    # -- steps -----------------------------------------------------------------------------------
+
+    def step(self, action: Any) -> StepResult:
+        """One step of every member (numpy in, numpy out, no graph)."""
+        a, clipped = self.check_action(action)
+        self._claim("step")
+        with torch.no_grad():
+            control, drive = self.task.drive(self._control, torch.from_numpy(a))
+            errors = self.batch.step(attachment_targets=_np(drive.targets), external_forces=_np(drive.forces))
+            x = torch.from_numpy(self.batch.positions())
+            v = torch.from_numpy(self.batch.velocities())
+            failed = np.array([e is not None for e in errors])
+            # A failed member stays at its previous state and control (the core rolled it back).
+            self._control = torch.where(torch.as_tensor(failed)[:, None, None], self._control, control)
+            self._steps += ~failed
+            obs, reward, terms = self._score(x, v)
+            return self._result(obs, reward, terms, x, v, errors, clipped)
+
+    def step_grad(self, action: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, StepResult]:
+        """One differentiable step of every member: ``action`` (N, action_dim) float64 torch
+        (may require grad). Returns the observation (N, obs_dim) and reward (N,) as tensors
+        whose graph runs through the Rust adjoint, and the numpy result for the rest."""
+        if not isinstance(action, torch.Tensor) or action.dtype != torch.float64:
+            raise InputError("step_grad takes a float64 torch tensor action")
+        _, clipped = self.check_action(action)
+        if len(set(self._steps.tolist())) != 1:
+            raise InputError("step_grad steps every member together: reset all of them at once "
+                             "(their episodes are at different steps)")
+        self._claim("step_grad")
+        a = action.reshape(self.num_envs, self.task.action_dim)
+        low, high = (torch.as_tensor(b, dtype=torch.float64) for b in (self.action_low, self.action_high))
+        control, drive = self.task.drive(self._control, torch.clamp(a, low, high))
+        x, v = _BatchStep.apply(self, drive.targets, drive.forces, self._x_t, self._v_t)
+        self._control, self._x_t, self._v_t = control, x, v
+        self._steps += 1
+        obs, reward, terms = self._score(x, v)
+        errors = [None] * self.num_envs
+        return obs, reward, self._result(obs.detach(), reward.detach(), terms, x.detach(), v.detach(), errors,
+                                         clipped)
+
+    def _score(self, x: torch.Tensor, v: torch.Tensor):
+        """Observation, reward and loss terms of the members' states (members grouped by
+        their step index, which the task's per-step loss may depend on)."""
+        obs = self.task.observe(x, v, self._control)
+        parts: dict[str, list] = {}
+        order = []
+        for step in np.unique(self._steps):
+            idx = torch.as_tensor(np.flatnonzero(self._steps == step))
+            order.append(idx)
+            for name, t in self.task.loss_terms(x[idx], v[idx], self._control[idx], int(step)).items():
+                parts.setdefault(name, []).append(t)
+        inverse = torch.argsort(torch.cat(order))
+        terms = {name: torch.cat(ts)[inverse] for name, ts in parts.items()}
+        reward = -sum(terms.values())
+        return obs, reward, terms
+
+    def _result(self, obs, reward, terms, x, v, errors, clipped) -> StepResult:
+        failed = np.array([e is not None for e in errors])
+        truncated = (self._steps >= self.task.horizon) | failed
+        stats = self.batch.last_steps()
+        infos = []
+        for i in range(self.num_envs):
+            info = {name: float(t[i].detach()) for name, t in terms.items()}
+            info.update(step=int(self._steps[i]), solver_iterations=stats[i]["iterations"],
+                        solver_converged=bool(stats[i]["converged"]), action_clipped=int(clipped[i]))
+            if failed[i]:
+                info["solver_error"] = f"{type(errors[i]).__name__}: {errors[i]}"
+            infos.append(info)
+        if truncated.any():
+            with torch.no_grad():
+                success = self.task.success(x, v, self._control.detach())
+            for i in np.flatnonzero(truncated):
+                infos[i]["success"] = bool(success[i]) and not failed[i]
+        return StepResult(obs=obs.numpy().copy(), reward=reward.numpy().copy(),
+                          terminated=np.zeros(self.num_envs, dtype=bool), truncated=truncated, infos=infos)
+
+
+def _np(t: torch.Tensor | None) -> np.ndarray | None:
+    return None if t is None else t.detach().cpu().numpy().astype(np.float64)
+
+
+class _BatchStep(torch.autograd.Function):
+    """One recorded batched step as an autograd node: its backward is the one-step adjoint of
+    the recorded step (no second forward). Inputs: engine, targets (N, k, 3) or None, forces
+    (N, n, 3) or None, x_prev, v_prev (N, n, 3); outputs x, v (N, n, 3)."""
+
+    @staticmethod
+    def forward(ctx, engine, targets, forces, x_prev, v_prev):
+        k = int(engine._steps[0])
+        errors = engine.batch.step(attachment_targets=_np(targets), external_forces=_np(forces))
+        failed = [(i, e) for i, e in enumerate(errors) if e is not None]
+        if failed:
+            i, e = failed[0]
+            raise type(e)(f"env {i}, step {k}: {e} (a differentiable episode cannot continue past a "
+                          f"failed step; call reset())")
+        ctx.engine, ctx.k, ctx.episode = engine, k, engine._episode
+        ctx.has_targets, ctx.has_forces = targets is not None, forces is not None
+        return torch.from_numpy(engine.batch.positions()), torch.from_numpy(engine.batch.velocities())
+
+    @staticmethod
+    def backward(ctx, gx, gv):
+        engine = ctx.engine
+        if engine._episode != ctx.episode:
+            raise InputError("this step's episode was reset before backward(): its recording is gone; "
+                             "call backward() before reset()")
+        g = engine.batch.backward_step(ctx.k, _np(gx), _np(gv))
+        for i, warnings_i in enumerate(g["warnings"]):
+            for w in warnings_i:
+                import warnings
+
+                warnings.warn(f"diffcloth gradient (env {i}, step {ctx.k}): {w}", stacklevel=2)
+        t = lambda a: torch.from_numpy(a)  # noqa: E731
+        return (None, t(g["attachment_targets"]) if ctx.has_targets else None,
+                t(g["external_forces"]) if ctx.has_forces else None, t(g["x"]), t(g["v"]))

@@ -1,0 +1,41 @@
+"""The hat controller comparison (APG vs PPO) under one budget config; thin entry point over
+``diffcloth_gym.training.compare``.
+
+    .venv/bin/python scripts/compare_hat.py --budget full   # benchmarks/results/hat_controller.*
+    .venv/bin/python scripts/compare_hat.py --budget demo --out out/demo
+
+Runs checkpoint every APG epoch and PPO chunk; the same command resumes them.
+"""
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--budget", default="full", help="demo | full | a budget TOML path (default full)")
+    p.add_argument("--out", default=None, help="results folder (default benchmarks/results for full, else out/<budget>)")
+    p.add_argument("--runs", default=None, help="run folders with checkpoints and logs (default out/runs/<budget>)")
+    p.add_argument("--seeds", type=int, nargs="*", default=None, help="override the budget's seeds")
+    p.add_argument("--methods", nargs="*", default=None, help="override the budget's methods (apg ppo)")
+    p.add_argument("--max-minutes", type=float, default=None, help="stop training after this long (checkpointed; "
+                   "the results say partial; rerun to resume)")
+    p.add_argument("--fresh", action="store_true", help="ignore existing checkpoints")
+    p.add_argument("--no-gif", action="store_true")
+    args = p.parse_args(argv)
+    from diffcloth_gym.training import compare
+
+    budget = args.budget if args.budget.endswith(".toml") else f"budget_{args.budget}"
+    tag = Path(budget).stem.removeprefix("budget_")
+    out = args.out or ("benchmarks/results" if tag == "full" else f"out/{tag}")
+    command = "python scripts/compare_hat.py " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
+    return compare.run(budget, out=out, runs=args.runs or f"out/runs/{tag}", seeds=args.seeds, methods=args.methods,
+                       max_minutes=args.max_minutes, resume=not args.fresh, gif=not args.no_gif, command=command.strip())
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,124 @@
+"""The training harness on tiny budgets (FlyingNapkin 4x4: cheap; the harness is env-generic and
+the Hat uses the same code): an APG epoch lowers the training loss on a fixed start, PPO runs end
+to end on the batched vector env, evaluation on TEST_STARTS is bitwise repeatable, the time-step
+count equals the steps simulated, and a run killed after a checkpoint resumes bitwise."""
+
+import numpy as np
+import pytest
+import torch
+
+import diffcloth_gym  # noqa: F401
+from diffcloth_gym.envs.flying_napkin_v0 import TEST_STARTS
+from diffcloth_gym.training.apg import APGTrainer
+from diffcloth_gym.training.evaluate import evaluate
+from diffcloth_gym.training.policy import MLPPolicy
+
+pytest.importorskip("stable_baselines3")
+
+NAPKIN = {"env_id": "DiffCloth/FlyingNapkin-v0", "env": {"resolution": 4}}
+HORIZON = 100
+STARTS = list(TEST_STARTS[:4])
+
+
+def apg_cfg(**kw):
+    return {**NAPKIN, "batch": 2, "epochs": 2, "eval_every": 1, "lr": 1e-2, **kw}
+
+
+def ppo_cfg(**kw):
+    return {**NAPKIN, "num_envs": 2, "n_steps": HORIZON, "batch_size": 100, "n_epochs": 2,
+            "timesteps": 400, "eval_every": 200, **kw}
+
+
+def test_an_apg_epoch_lowers_the_training_loss_on_a_fixed_start(monkeypatch):
+    import diffcloth_gym.training.apg as apg
+
+    monkeypatch.setattr(apg, "epoch_seed", lambda *a: 7)  # the same starts every epoch
+    tr = APGTrainer(apg_cfg(clip_grad_norm=0.0), progress=False, eval_starts=STARTS[:1])
+    first = tr.run_epoch()
+    second = tr.run_epoch()
+    assert np.isfinite(first["grad_norm"]) and first["grad_norm"] > 0 and not first["clipped"]
+    assert second["train_loss"] < first["train_loss"]
+    # Per-member gradients add up to the batch gradient (the loss is the batch mean).
+    assert first["member_grad_norm_mean"] > 0 and first["grad_variance"] >= 0
+
+
+def test_apg_step_count_equals_the_steps_simulated_and_clipping_is_logged(tmp_path):
+    tr = APGTrainer(apg_cfg(clip_grad_norm=1e-6, window=30), tmp_path, progress=False, eval_starts=STARTS)
+    s = tr.train()
+    # 2 epochs x 2 members x 100 steps, forward and one-step adjoints; evaluation apart.
+    assert s["forward"] == s["attempted"] == 2 * 2 * HORIZON == s["backward"]
+    assert s["paper_steps"] == 2 * HORIZON
+    assert s["eval_steps"] == 3 * len(STARTS) * HORIZON  # at epochs 0, 1, 2
+    assert sum(tr.engine.batch.step_counts()) == 2 * HORIZON  # the last epoch's, as counted
+    rows = tr.train_log.rows()
+    assert [r["clipped"] for r in rows] == ["True", "True"] and s["clipped_epochs"] == 2
+
+
+def test_evaluation_on_test_starts_is_bitwise_deterministic():
+    policy = MLPPolicy(96, 48, seed=3, last_layer_scale=1.0)
+    a = evaluate(policy, NAPKIN["env_id"], STARTS, NAPKIN["env"])
+    b = evaluate(policy, NAPKIN["env_id"], STARTS, NAPKIN["env"])
+    assert a.loss.tobytes() == b.loss.tobytes() and a.final_positions.tobytes() == b.final_positions.tobytes()
+    assert a.steps == len(STARTS) * HORIZON and len(a.per_start()) == len(STARTS)
+    assert set(a.terms) == {"distance"} and a.success.dtype == bool
+    # Default starts: every TEST_STARTS.
+    assert len(evaluate(policy, NAPKIN["env_id"], env_kwargs=NAPKIN["env"]).starts) == len(TEST_STARTS)
+
+
+def test_apg_resume_continues_bitwise(tmp_path):
+    full = APGTrainer(apg_cfg(epochs=3), tmp_path / "full", progress=False, eval_starts=STARTS[:2])
+    full.train()
+    part = APGTrainer(apg_cfg(epochs=3), tmp_path / "part", progress=False, eval_starts=STARTS[:2])
+    part.train(epochs=2)  # "killed" after epoch 2's checkpoint
+    resumed = APGTrainer(apg_cfg(epochs=3), tmp_path / "part", progress=False, eval_starts=STARTS[:2])
+    assert resumed.epoch == 2
+    resumed.train()
+    for p, q in zip(full.policy.parameters(), resumed.policy.parameters()):
+        assert torch.equal(p, q)
+    strip = lambda c: [{k: v for k, v in p.items() if k != "train_s"} for p in c]  # noqa: E731
+    assert strip(full.curve) == strip(resumed.curve)
+    assert full.counter.snapshot() == resumed.counter.snapshot()
+    assert len(resumed.train_log.rows()) == 3
+
+
+def test_ppo_runs_end_to_end_counts_its_steps_and_resumes_bitwise(tmp_path):
+    from diffcloth_gym.training.ppo import PPOTrainer
+
+    full = PPOTrainer(ppo_cfg(), tmp_path / "full", progress=False, eval_starts=STARTS)
+    s = full.train()
+    assert s["num_timesteps"] == 400 == s["forward"] == s["attempted"] and s["backward"] == 0
+    assert [p["steps"] for p in s["curve"]] == [0, 200, 400]
+    assert all(np.isfinite(p["test_loss"]) for p in s["curve"])
+    assert (tmp_path / "full" / "sb3" / "progress.csv").exists()
+    part = PPOTrainer(ppo_cfg(), tmp_path / "part", progress=False, eval_starts=STARTS)
+    part.train(timesteps=200)
+    resumed = PPOTrainer(ppo_cfg(), tmp_path / "part", progress=False, eval_starts=STARTS)
+    assert resumed.model.num_timesteps == 200
+    r = resumed.train()
+    assert [p["test_loss"] for p in r["curve"]] == [p["test_loss"] for p in s["curve"]]
+    assert r["forward"] == s["forward"]
+    for p, q in zip(full.model.policy.parameters(), resumed.model.policy.parameters()):
+        assert torch.equal(p, q)
+
+
+def test_compare_writes_results_and_marks_a_stopped_run_partial(tmp_path):
+    import json
+
+    from diffcloth_gym.training import compare
+
+    budget = {"name": "tiny", **NAPKIN, "seeds": [0], "methods": ["apg", "ppo"], "eval_stride": 10,
+              "gif_starts_stride": 10, "gif_frame_every": 50,
+              "apg": {"epochs": 1, "batch": 2, "eval_every": 1},
+              "ppo": {"num_envs": 2, "n_steps": HORIZON, "batch_size": 100, "n_epochs": 1, "timesteps": 200,
+                      "eval_every": 200}}
+    r = compare.run(budget, out=tmp_path, progress=False, command="pytest")
+    for ext in ("json", "md", "png", "gif"):
+        assert (tmp_path / f"hat_controller.{ext}").stat().st_size > 0
+    data = json.loads((tmp_path / "hat_controller.json").read_text())
+    assert not data["partial"] and len(data["test_starts"]) == 2
+    assert [s["forward"] for s in data["runs"]] == [2 * HORIZON, 200]
+    assert data["runs"][0]["reach_1.1x_apg"] is not None  # APG reaches its own final loss
+    # A deadline already passed: nothing trains, the longer budget is partial, and says so.
+    longer = {**budget, "apg": {**budget["apg"], "epochs": 3}}
+    r = compare.run(longer, out=tmp_path, progress=False, max_minutes=0, gif=False, command="pytest")
+    assert r["partial"] and "PARTIAL" in (tmp_path / "hat_controller.md").read_text()
