@@ -3,8 +3,10 @@
 Per env, with random actions in the action box:
 - ``single``: a single env's steps/s;
 - ``vector``: env steps/s of the Gymnasium vector env at N = 1, 2, 8, 32, on 1 and 2 threads
-  (``RAYON_NUM_THREADS``, one subprocess per thread count so the pool is fresh), and the
-  2-thread speed-up (target: >= 1.8x at the larger N);
+  (two vector envs in one process, each on a thread pool of its own: ``threads=1`` and
+  ``threads=2``, timed alternately so both see the same machine load), the 2-thread speed-up
+  (target: >= 1.8x at the larger N), and the same for the Rust batch step alone (the time
+  inside ``Batch.step``; the rest is Python: actions, observations, rewards);
 - ``step_grad``: forward + backward steps/s of a closed-loop differentiable rollout, and its
   cost relative to a plain step at the same accuracy (the env's steps are gradient-grade by
   construction; target <= 2.5x), plus the tape memory of the episode per member;
@@ -19,9 +21,6 @@ Run: python -m benchmarks env_throughput [--quick] [--envs Hat-v0 ...]
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import subprocess
 import sys
 import time
 
@@ -43,23 +42,50 @@ def best_of(repeats: int, fn) -> float:
     return min(times)
 
 
-def vector_rate(env_id: str, n: int, steps: int, repeats: int) -> float:
-    """Env steps/s of the vector env with ``n`` members (in this process's thread pool)."""
+class _TimedBatch:
+    """Forwards to a ``_core.Batch`` and adds up the wall time of its ``step`` calls."""
+
+    def __init__(self, batch):
+        self._batch, self.seconds = batch, 0.0
+
+    def __getattr__(self, name):
+        return getattr(self._batch, name)
+
+    def step(self, **kwargs):
+        t = time.perf_counter()
+        try:
+            return self._batch.step(**kwargs)
+        finally:
+            self.seconds += time.perf_counter() - t
+
+
+def vector_rates(env_id: str, n: int, steps: int, repeats: int) -> dict:
+    """Env steps/s of the vector env with ``n`` members on 1 and 2 threads, timed alternately
+    (after one untimed warm-up step), and the same for the batch step alone."""
     import gymnasium as gym
 
     import diffcloth_gym  # noqa: F401
 
-    venv = gym.make_vec(env_id, num_envs=n)
-    rng = np.random.default_rng(0)
-    space = venv.single_action_space
-    actions = rng.uniform(space.low, space.high, (steps, n, space.shape[0]))
-
-    def run():
-        venv.reset(seed=0)
-        for k in range(steps):
-            venv.step(actions[k])
-
-    return n * steps / best_of(repeats, run)
+    venvs = {t: gym.make_vec(env_id, num_envs=n, threads=t) for t in (1, 2)}
+    space = venvs[1].single_action_space
+    actions = np.random.default_rng(0).uniform(space.low, space.high, (steps + 1, n, space.shape[0]))
+    best = {t: (np.inf, np.inf) for t in venvs}
+    for _ in range(repeats):
+        for t, venv in venvs.items():
+            engine = venv.unwrapped.engine
+            venv.reset(seed=0)
+            venv.step(actions[0])
+            timed = engine.batch = _TimedBatch(getattr(engine.batch, "_batch", engine.batch))
+            start = time.perf_counter()
+            for k in range(1, steps + 1):
+                venv.step(actions[k])
+            total = time.perf_counter() - start
+            best[t] = (min(best[t][0], total), min(best[t][1], timed.seconds))
+    env_rate = {t: n * steps / best[t][0] for t in venvs}
+    core_rate = {t: n * steps / best[t][1] for t in venvs}
+    return {"steps_per_s_1t": env_rate[1], "steps_per_s_2t": env_rate[2], "speedup_2t": env_rate[2] / env_rate[1],
+            "core_steps_per_s_1t": core_rate[1], "core_steps_per_s_2t": core_rate[2],
+            "core_speedup_2t": core_rate[2] / core_rate[1]}
 
 
 def single_rate(env_id: str, steps: int, repeats: int) -> float:
@@ -132,48 +158,31 @@ def render_rate(env_id: str, frames: int, repeats: int) -> float | None:
     return frames / best_of(repeats, run)
 
 
-def _child(argv: list[str]) -> int:
-    """Runs one vector measurement in this process and prints it as JSON (see ``vector_rows``)."""
-    env_id, n, steps, repeats = argv[0], int(argv[1]), int(argv[2]), int(argv[3])
-    print(json.dumps(vector_rate(env_id, n, steps, repeats)))
-    return 0
-
-
 def vector_rows(env_id: str, steps: int, repeats: int, sizes: list[int]) -> list[dict]:
-    rows = []
-    for n in sizes:
-        rates = {}
-        for threads in (1, 2):
-            env = {**os.environ, "RAYON_NUM_THREADS": str(threads)}
-            out = subprocess.run([sys.executable, "-m", "benchmarks.env_throughput", "--child", env_id, str(n),
-                                  str(steps), str(repeats)], env=env, capture_output=True, text=True, check=True)
-            rates[threads] = json.loads(out.stdout.strip().splitlines()[-1])
-        rows.append({"env": env_id, "measure": f"vector N={n}", "steps_per_s_1t": rates[1],
-                     "steps_per_s_2t": rates[2], "speedup_2t": rates[2] / rates[1]})
-    return rows
+    return [{"env": env_id, "measure": f"vector N={n}", **vector_rates(env_id, n, steps, repeats)} for n in sizes]
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv and argv[0] == "--child":
-        return _child(argv[1:])
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="fewer steps and sizes (a smoke run)")
     parser.add_argument("--envs", nargs="*", default=ENV_IDS, help="env ids (default: all three)")
-    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args(argv)
-    steps = 3 if args.quick else 10
+    steps = 3 if args.quick else 20
     sizes = [1, 2] if args.quick else SIZES
     rows = []
     for env_id in args.envs:
         rows.append({"env": env_id, "measure": "single", "steps_per_s_1t": single_rate(env_id, steps, args.repeats)})
         rows += vector_rows(env_id, steps, args.repeats, sizes)
+        print(results_io.markdown_table(rows), flush=True)
         rows.append({"env": env_id, "measure": "step_grad", **step_grad_costs(env_id, steps, args.repeats)})
         fps = render_rate(env_id, 10 if args.quick else 50, args.repeats)
         if fps is not None:
             rows.append({"env": env_id, "measure": "render 480x480", "frames_per_s": fps})
     notes = ("Env steps per second with random actions (single env in this process's default pool; vector "
-             "envs on 1 and 2 rayon threads, each in a fresh subprocess). step_grad: a closed-loop "
+             "envs on pools of their own with 1 and 2 threads, timed alternately in one process; 'core' is the "
+             "time inside the Rust batch step alone, the rest being Python). step_grad: a closed-loop "
              "differentiable rollout's forward and backward time per step, and (forward + backward) / plain "
              "step at the same accuracy (the env's plain and recorded steps share one tolerance). Tape memory "
              "is what a member's recording holds for a full episode (freed at reset).")

@@ -91,6 +91,33 @@ def test_vector_env_members_equal_single_envs(env_id):
             assert np.array_equal(obs[i], o) and rew[i] == r
 
 
+def vector_rollout(venv, seed, steps):
+    obs, _ = venv.reset(seed=seed)
+    rng = np.random.default_rng(0)
+    space = venv.single_action_space
+    out = [obs]
+    for _ in range(steps):
+        obs, rew, *_ = venv.step(rng.uniform(space.low, space.high, (venv.num_envs, space.shape[0])))
+        out += [obs, rew]
+    return np.concatenate([np.ravel(o) for o in out])
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_vector_env_threads_argument_changes_speed_not_the_trajectory(env_id):
+    runs = []
+    for threads in (1, 2):
+        venv = gym.make_vec(env_id, num_envs=3, threads=threads, **KWARGS.get(env_id, {}))
+        assert venv.unwrapped.engine.batch.threads == threads
+        runs.append(vector_rollout(venv, seed=2, steps=SHORT))
+    assert np.array_equal(*runs)
+
+
+@pytest.mark.parametrize("threads", [0, -1, 2.5, "2", 10**6])
+def test_bad_thread_counts_are_refused_naming_the_argument(threads):
+    with pytest.raises(InputError, match="threads"):
+        gym.make_vec("DiffCloth/FlyingNapkin-v0", num_envs=2, threads=threads, resolution=4)
+
+
 @pytest.mark.parametrize("env_id", IDS)
 def test_vector_env_autoresets_on_the_next_step(env_id):
     venv = gym.make_vec(env_id, num_envs=2, **KWARGS.get(env_id, {}))

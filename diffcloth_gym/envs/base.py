@@ -22,6 +22,9 @@ class ClothEnv(gym.Env):
       or, where a display exists, ``"human"`` (a matplotlib window).
     - ``solver``: overrides of the scene's ``[solver]`` table (e.g. ``{"tolerance": 1e-9}``);
       plain and recorded steps share one tolerance (default ``engine.DEFAULT_TOLERANCE``).
+    - ``threads``: run the simulator on a thread pool of its own with this many threads
+      (default None: rayon's global pool, sized by ``RAYON_NUM_THREADS`` or the core count).
+      The trajectory does not depend on it.
     - every key of the task's ``default_config()`` (see the env's docstring).
     """
 
@@ -30,12 +33,13 @@ class ClothEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"] + (["human"] if display_available() else []), "render_fps": 30}
     task_class: type[ClothTask]
 
-    def __init__(self, render_mode: str | None = None, solver: dict | None = None, **task_overrides: Any):
+    def __init__(self, render_mode: str | None = None, solver: dict | None = None, threads: int | None = None,
+                 **task_overrides: Any):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, "
                              f"got {render_mode!r}")
         self.render_mode = render_mode
-        self.engine = ClothEngine(self.task_class, 1, solver=solver, **task_overrides)
+        self.engine = ClothEngine(self.task_class, 1, solver=solver, threads=threads, **task_overrides)
         self.task = self.engine.task
         bound = self.task.action_bound
         self.action_space = gym.spaces.Box(-bound, bound, (self.task.action_dim,), np.float64)

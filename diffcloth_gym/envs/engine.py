@@ -72,11 +72,11 @@ class ClothEngine:
     """``num_envs`` members of ``task_class``; see the module docstring."""
 
     def __init__(self, task_class: type[ClothTask], num_envs: int = 1, solver: Mapping[str, Any] | None = None,
-                 **task_overrides: Any):
+                 threads: int | None = None, **task_overrides: Any):
         self.task_config = task_config(task_class, task_overrides)
         self.scene = build_scene(task_class, self.task_config, solver)
         self.template = Simulator.from_config(self.scene)
-        self.batch = _core.Batch(self.template._core, num_envs)
+        self.batch = _core.Batch(self.template._core, num_envs, threads)
         self.num_envs = num_envs
         self.task = task_class(self.scene, self.template.rest_positions, self.template.attachment_nodes,
                                self.task_config)

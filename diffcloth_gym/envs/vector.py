@@ -35,14 +35,16 @@ def seeded_generators(seed: int | list[int | None] | None, n: int) -> list[np.ra
 class ClothVectorEnv(VectorEnv):
     """``num_envs`` members of a cloth task. Autoreset mode NEXT_STEP: the step after a member's
     episode ends resets it (its action is ignored; reward 0, not terminated, not truncated).
-    ``step_grad`` needs the members in step (``reset()`` all together, no autoreset between)."""
+    ``step_grad`` needs the members in step (``reset()`` all together, no autoreset between).
+    Arguments: those of the single env (``solver``, ``threads``, the task's; see ``ClothEnv``);
+    ``threads`` sizes the pool the members are stepped on in parallel."""
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"]}
     task_class: type[ClothTask]
 
     def __init__(self, num_envs: int = 1, render_mode: str | None = None, solver: dict | None = None,
-                 **task_overrides: Any):
-        self.engine = ClothEngine(self.task_class, num_envs, solver=solver, **task_overrides)
+                 threads: int | None = None, **task_overrides: Any):
+        self.engine = ClothEngine(self.task_class, num_envs, solver=solver, threads=threads, **task_overrides)
         self.task = self.engine.task
         self.num_envs = num_envs
         self.render_mode = render_mode

@@ -44,13 +44,30 @@ impl PyBatch {
 #[pymethods]
 impl PyBatch {
     /// `size` simulators sharing `sim`'s model (its factorization) and solver settings, each
-    /// at the rest state, not recording.
+    /// at the rest state, not recording. `threads`: run on a thread pool of the batch's own
+    /// with that many threads (default: rayon's global pool, sized by `RAYON_NUM_THREADS`).
     #[new]
-    fn new(py: Python<'_>, sim: &PySimulator, size: &Bound<'_, PyAny>) -> PyResult<Self> {
+    #[pyo3(signature = (sim, size, threads=None))]
+    fn new(
+        py: Python<'_>,
+        sim: &PySimulator,
+        size: &Bound<'_, PyAny>,
+        threads: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
         let size = usize_arg("size", size)?;
+        let threads = threads.map(|t| usize_arg("threads", t)).transpose()?;
         let (model, solver) = (sim.inner.model().clone(), sim.inner.solver().clone());
-        let inner = guarded(py, || Batch::new(model, solver, size))?;
+        let inner = guarded(py, || match threads {
+            Some(t) => Batch::with_threads(model, solver, size, t),
+            None => Batch::new(model, solver, size),
+        })?;
         Ok(Self { inner })
+    }
+
+    /// Threads a batched step runs on.
+    #[getter]
+    fn threads(&self) -> usize {
+        self.inner.threads()
     }
 
     fn __len__(&self) -> usize {

@@ -15,8 +15,15 @@ use std::sync::Arc;
 /// Largest batch (a bound on the memory one call may ask for).
 pub const MAX_BATCH: usize = 4096;
 
+/// Most threads a batch may own (a bound on what one call may spawn).
+pub const MAX_THREADS: usize = 1024;
+
 pub struct Batch {
     members: Vec<Member>,
+    /// The batch's own thread pool, when it was given a thread count; else rayon's global
+    /// pool. Owning one lets a process run batches at different thread counts side by side
+    /// (and a benchmark compare them in one run).
+    pool: Option<rayon::ThreadPool>,
 }
 
 /// One simulator of the batch and the warm start of its chained one-step adjoints.
@@ -46,7 +53,49 @@ impl Batch {
                 warm: None,
             })
             .collect();
-        Ok(Self { members })
+        Ok(Self {
+            members,
+            pool: None,
+        })
+    }
+
+    /// As [`Batch::new`], stepped on a pool of its own with `threads` threads.
+    pub fn with_threads(
+        model: Arc<Model>,
+        solver: SolverSettings,
+        size: usize,
+        threads: usize,
+    ) -> Result<Self> {
+        if threads == 0 || threads > MAX_THREADS {
+            return Err(Error::Input(format!(
+                "threads must be in 1..={MAX_THREADS}, got {threads}"
+            )));
+        }
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .map_err(|e| Error::Input(format!("threads: cannot start {threads} threads: {e}")))?;
+        let mut batch = Self::new(model, solver, size)?;
+        batch.pool = Some(pool);
+        Ok(batch)
+    }
+
+    /// Threads a parallel call of this batch runs on.
+    pub fn threads(&self) -> usize {
+        match &self.pool {
+            Some(pool) => pool.current_num_threads(),
+            None => rayon::current_num_threads(),
+        }
+    }
+
+    /// Runs `f` on the members inside the batch's pool (nested rayon work of the members
+    /// included), or in the caller's pool when the batch has none.
+    fn in_pool<R: Send>(&mut self, f: impl FnOnce(&mut [Member]) -> R + Send) -> R {
+        let members = &mut self.members;
+        match &self.pool {
+            Some(pool) => pool.install(|| f(members)),
+            None => f(members),
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -82,9 +131,11 @@ impl Batch {
 
     /// Applies `f` to every member in parallel.
     pub fn for_each_mut(&mut self, f: impl Fn(&mut Simulator) + Sync) {
-        self.members.par_iter_mut().for_each(|m| {
-            m.warm = None;
-            f(&mut m.sim)
+        self.in_pool(|members| {
+            members.par_iter_mut().for_each(|m| {
+                m.warm = None;
+                f(&mut m.sim)
+            })
         });
     }
 
@@ -98,17 +149,18 @@ impl Batch {
                 inputs.len()
             )));
         }
-        Ok(self
-            .members
-            .par_iter_mut()
-            .zip(inputs)
-            .map(|(m, input)| {
-                m.sim.step(StepInput {
-                    attachment_targets: input.attachment_targets,
-                    external_forces: input.external_forces,
+        Ok(self.in_pool(|members| {
+            members
+                .par_iter_mut()
+                .zip(inputs)
+                .map(|(m, input)| {
+                    m.sim.step(StepInput {
+                        attachment_targets: input.attachment_targets,
+                        external_forces: input.external_forces,
+                    })
                 })
-            })
-            .collect())
+                .collect()
+        }))
     }
 
     /// The one-step adjoint ([`Simulator::backward_step`]) of recorded step `k` of every
@@ -130,12 +182,13 @@ impl Batch {
                 )));
             }
         }
-        Ok(self
-            .members
-            .par_iter_mut()
-            .zip(dl_dx.par_iter().zip(dl_dv))
-            .map(|(m, (gx, gv))| m.sim.backward_step(k, gx, gv, options, &mut m.warm))
-            .collect())
+        Ok(self.in_pool(|members| {
+            members
+                .par_iter_mut()
+                .zip(dl_dx.par_iter().zip(dl_dv))
+                .map(|(m, (gx, gv))| m.sim.backward_step(k, gx, gv, options, &mut m.warm))
+                .collect()
+        }))
     }
 
     fn index_error(&self, i: usize) -> Error {
