@@ -85,10 +85,16 @@ fn batch_members_match_standalone_simulators_bitwise_on_one_and_two_threads() {
         // The same with the batch's own pool, called from the global pool.
         let mut own = Batch::with_threads(model.clone(), solver.clone(), 4, threads).unwrap();
         assert_eq!(own.threads(), threads);
-        assert_eq!(run_batch(&mut own, &template, steps), expected, "own pool, {threads} thread(s)");
+        assert_eq!(
+            run_batch(&mut own, &template, steps),
+            expected,
+            "own pool, {threads} thread(s)"
+        );
     }
     for bad in [0, diffcloth::batch::MAX_THREADS + 1] {
-        let err = Batch::with_threads(model.clone(), solver.clone(), 2, bad).err().unwrap();
+        let err = Batch::with_threads(model.clone(), solver.clone(), 2, bad)
+            .err()
+            .unwrap();
         assert!(err.to_string().contains("threads"), "{err}");
     }
     // One factorization for the template and every member of both batches.
