@@ -22,8 +22,8 @@ from diffcloth_gym.training.accounting import threads
 from diffcloth_gym.training.config import load, method_config
 from diffcloth_gym.training.evaluate import test_starts
 
-METHODS = ("apg", "ppo")
-COLORS = {"apg": "tab:blue", "ppo": "tab:orange"}
+METHODS = ("apg", "ppo", "shac")
+COLORS = {"apg": "tab:blue", "ppo": "tab:orange", "shac": "tab:green"}
 
 
 def eval_starts(budget: Mapping[str, Any]) -> list:
@@ -42,6 +42,10 @@ def trainer_for(method: str, budget: Mapping[str, Any], run_dir: Path, seed: int
         from diffcloth_gym.training.ppo import PPOTrainer
 
         return PPOTrainer(cfg, run_dir, seed, resume=resume, progress=progress, eval_starts=starts)
+    if method == "shac":
+        from diffcloth_gym.training.shac import SHACTrainer
+
+        return SHACTrainer(cfg, run_dir, seed, resume=resume, progress=progress, eval_starts=starts)
     raise ValueError(f"unknown method {method!r}; known: {METHODS}")
 
 
@@ -153,7 +157,7 @@ def plot(results: Mapping[str, Any], path: Path) -> None:
     if results.get("target_loss_1.1x_apg"):
         for ax in axes:
             ax.axhline(results["target_loss_1.1x_apg"], color="gray", ls="--", lw=1, label="1.1 x APG final")
-    axes[0].set_xlabel("simulated time steps, counted (APG: forward only; 0 drawn at 1)")
+    axes[0].set_xlabel("simulated time steps, counted (APG, SHAC: forward only; 0 drawn at 1)")
     axes[1].set_xlabel("training wall-clock seconds (0 drawn at 1)")
     for ax in axes:
         ax.set_xscale("log")
@@ -161,10 +165,14 @@ def plot(results: Mapping[str, Any], path: Path) -> None:
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=7)
     tag = " (PARTIAL: budget not finished)" if results["partial"] else ""
-    fig.suptitle(f"{results['env_id']}: APG vs PPO, budget '{results['budget']}'{tag}")
+    fig.suptitle(f"{results['env_id']}: {_title(results['methods'])}, budget '{results['budget']}'{tag}")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _title(methods: Sequence[str]) -> str:
+    return " vs ".join(m.upper() for m in methods)
 
 
 def _f(x: Any, fmt: str = "{:.4g}") -> str:
@@ -173,7 +181,7 @@ def _f(x: Any, fmt: str = "{:.4g}") -> str:
 
 def markdown(results: Mapping[str, Any], name: str) -> str:
     r = results
-    lines = [f"# {r['env_id']} controller: APG vs PPO ({r['budget']} budget)", ""]
+    lines = [f"# {r['env_id']} controller: {_title(r['methods'])} ({r['budget']} budget)", ""]
     if r["partial"]:
         lines += ["**PARTIAL RUN**: at least one run stopped before its budget (checkpointed). "
                   f"Resume with the same command: `{r.get('command') or 'scripts/compare_hat.py'}`.", ""]
@@ -198,9 +206,10 @@ def markdown(results: Mapping[str, Any], name: str) -> str:
     lines += ["", f"PPO / APG time steps to the target loss: {_f(ratio, '{:.1f}x') if ratio else why} "
               f"(paper: 85x, Adam 23,200 vs PPO 1,978,000).", "",
               "Counting: time steps are every step the simulator completed in training, read from the "
-              "engine's per-member step counters (evaluation apart). APG's backward pass is a one-step "
-              "adjoint per recorded step, listed as 'backward steps' and not added. The paper counts one "
-              "rollout per APG epoch (epochs x horizon, 'paper's count') although its code rolls out 20.", "",
+              "engine's per-member step counters (evaluation apart). APG's and SHAC's backward passes are "
+              "one-step adjoints per recorded step, listed as 'backward steps' and not added. The paper "
+              "counts one rollout per APG epoch (epochs x horizon, 'paper's count') although its code rolls "
+              "out 20.", "",
               f"Threads: simulator {r['machine']['simulator_threads']}, torch {r['machine']['torch_threads']}, "
               f"cores {r['machine']['cpu_count']}. Wall clock of this invocation: {r['wall_s']:.0f} s.", "",
               f"![test loss vs time steps]({name}.png)", ""]

@@ -81,6 +81,19 @@ def make_eval_env(env_id: str, num_starts: int, env_kwargs: Mapping[str, Any] | 
     return gym.make_vec(env_id, num_envs=num_starts, **dict(env_kwargs or {}))
 
 
+class Evaluator:
+    """Evaluates the policies of one run on its starts, on one eval env built at first use."""
+
+    def __init__(self, env_id: str, starts: Sequence, env_kwargs: Mapping[str, Any] | None = None):
+        self.env_id, self.starts, self.env_kwargs = env_id, list(starts), dict(env_kwargs or {})
+        self._env = None
+
+    def __call__(self, policy: Any, frames_every: int | None = None) -> Evaluation:
+        if self._env is None:
+            self._env = make_eval_env(self.env_id, len(self.starts), self.env_kwargs)
+        return evaluate(policy, self.env_id, self.starts, env=self._env, frames_every=frames_every)
+
+
 def evaluate(policy: Any, env_id: str, starts: Sequence | None = None, env_kwargs: Mapping[str, Any] | None = None,
              env: Any = None, frames_every: int | None = None) -> Evaluation:
     """``policy`` from each of ``starts`` (default: every ``TEST_STARTS``) for one episode.

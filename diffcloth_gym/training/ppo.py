@@ -30,7 +30,7 @@ from tqdm.auto import tqdm
 
 from diffcloth_gym.training.accounting import Clock, count_steps, paper_count, threads
 from diffcloth_gym.training.config import load, merged
-from diffcloth_gym.training.evaluate import evaluate, make_eval_env, test_starts
+from diffcloth_gym.training.evaluate import Evaluator, test_starts
 from diffcloth_gym.training.runlog import CsvLog, load_checkpoint, rng_states, save_atomic, set_rng_states
 
 
@@ -86,7 +86,7 @@ class PPOTrainer:
         self.curve: list[dict] = []
         self.eval_steps = 0
         self.eval_starts = list(test_starts(c["env_id"]) if eval_starts is None else eval_starts)
-        self._eval_env = None
+        self._evaluator = Evaluator(c["env_id"], self.eval_starts, c["env"])
         self.last_eval: list[dict] = []
         ck = load_checkpoint(self.run_dir / "checkpoint.pt") if (self.run_dir and resume) else None
         if ck is None:
@@ -140,10 +140,7 @@ class PPOTrainer:
 
     # -- evaluation and the loop -------------------------------------------------------------------
     def evaluate(self, frames_every: int | None = None):
-        if self._eval_env is None:
-            self._eval_env = make_eval_env(self.cfg["env_id"], len(self.eval_starts), self.cfg["env"])
-        return evaluate(self.model, self.cfg["env_id"], self.eval_starts, env=self._eval_env,
-                        frames_every=frames_every)
+        return self._evaluator(self.model, frames_every)
 
     def _eval_point(self) -> None:
         self.clock.start()
