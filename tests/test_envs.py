@@ -196,3 +196,23 @@ def test_mixing_step_and_step_grad_in_one_episode_is_refused(env_id):
     env.step_grad(torch.from_numpy(a))
     with pytest.raises(InputError, match="not both"):
         env.step(a)
+
+
+def test_env_torch_work_runs_on_one_thread_and_the_callers_setting_is_restored():
+    env = make("DiffCloth/FlyingNapkin-v0")
+    seen = []
+    observe = env.task.observe
+    env.task.observe = lambda *a: (seen.append(torch.get_num_threads()), observe(*a))[1]
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        env.reset(seed=0)
+        env.step(env.action_space.sample())
+        env.reset(seed=0)
+        obs, reward, *_ = env.step_grad(torch.zeros(env.action_space.shape[0], dtype=torch.float64,
+                                                    requires_grad=True))
+        reward.backward()
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)
+    assert seen == [1, 1, 1, 1]  # reset, step, reset, step_grad
