@@ -18,7 +18,7 @@ if [ ! -f "$STAMP" ]; then
   # torch: the CPU runs use PyPI's default wheel (it brings CUDA libraries; ~1-2 min fresh).
   "$PY" -m pip install -q --disable-pip-version-check "maturin>=1.9.4,<2" "numpy>=1.26" "pytest>=8" \
     "matplotlib>=3.8" "torch>=2.8" "gymnasium>=1.4" "stable-baselines3>=2.9" "moviepy>=2" \
-    "tqdm>=4.66" "pillow>=10" "hypothesis>=6" \
+    "tqdm>=4.66" "pillow>=10" "hypothesis>=6" "tensorboard>=2.16" \
     "scipy>=1.11" "cma>=3.3"
   rm -f "$VENV"/.deps-*
   touch "$STAMP"

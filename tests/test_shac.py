@@ -80,6 +80,7 @@ def test_shac_counts_its_steps_logs_clipping_and_resumes_bitwise(tmp_path):
             assert torch.equal(p, q)
     assert [p["test_loss"] for p in r["curve"]] == [p["test_loss"] for p in s["curve"]]
     assert full.counter.snapshot() == resumed.counter.snapshot()
+    assert list((tmp_path / "full" / "tb").glob("events.out.tfevents.*"))  # TensorBoard beside the CSV
 
 
 def test_bad_window_is_refused():

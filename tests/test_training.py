@@ -90,6 +90,8 @@ def test_ppo_runs_end_to_end_counts_its_steps_and_resumes_bitwise(tmp_path):
     assert [p["steps"] for p in s["curve"]] == [0, 200, 400]
     assert all(np.isfinite(p["test_loss"]) for p in s["curve"])
     assert (tmp_path / "full" / "sb3" / "progress.csv").exists()
+    # TensorBoard too (scripts/_setup.sh installs it).
+    assert list((tmp_path / "full" / "sb3").glob("events.out.tfevents.*"))
     part = PPOTrainer(ppo_cfg(), tmp_path / "part", progress=False, eval_starts=STARTS)
     part.train(timesteps=200)
     resumed = PPOTrainer(ppo_cfg(), tmp_path / "part", progress=False, eval_starts=STARTS)

@@ -39,6 +39,26 @@ def _fixed(cfg: Mapping[str, Any]) -> dict:
     return {k: v for k, v in cfg.items() if k != "epochs"}
 
 
+def _tensorboard_writer(folder: Path, purge_step: int):
+    """A TensorBoard writer when ``tensorboard`` is installed (else None: the CSV logs stay).
+    ``purge_step`` drops events a killed run wrote after its last checkpoint."""
+    try:
+        from torch.utils.tensorboard import SummaryWriter
+    except ImportError:
+        return None
+    return SummaryWriter(str(folder), purge_step=purge_step)
+
+
+def _scalars(writer, group: str, row: Mapping[str, Any], step: int) -> None:
+    """The row's numbers as scalars ``group/key`` at ``step`` (simulated time steps)."""
+    if writer is None:
+        return
+    for key, value in row.items():
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            writer.add_scalar(f"{group}/{key}", value, step)
+    writer.flush()
+
+
 class AdjointWarnings:
     """Collects the simulator's gradient warnings (``"diffcloth gradient ..."``) raised inside
     the block, passes every other warning on, and says once per block how many there were."""
@@ -91,7 +111,7 @@ class EpochTrainer:
         self._evaluator = Evaluator(c["env_id"], self.eval_starts, c["env"])
         self.last_eval: list[dict] = []
         self.eval_steps = 0
-        self.train_log = self.eval_log = None
+        self.train_log = self.eval_log = self.tensorboard = None
         self.build()
         if self.run_dir is not None:
             self.run_dir.mkdir(parents=True, exist_ok=True)
@@ -99,6 +119,7 @@ class EpochTrainer:
             self.eval_log = CsvLog(self.run_dir / "eval.csv")
             if resume:
                 self._resume()
+            self.tensorboard = _tensorboard_writer(self.run_dir / "tb", purge_step=self.counter.forward)
 
     # -- hooks -----------------------------------------------------------------------------------
     def build(self) -> None:
@@ -189,6 +210,7 @@ class EpochTrainer:
         self.last_eval = ev.per_start()
         if self.eval_log is not None:
             self.eval_log.write(point)
+            _scalars(self.tensorboard, "eval", point, point["steps"])
 
     def train(self, epochs: int | None = None, deadline: float | None = None) -> dict[str, Any]:
         """Trains up to ``epochs`` in total (default the config's), evaluating every
@@ -208,6 +230,7 @@ class EpochTrainer:
             row["epoch_s"] = self.clock.stop("train")
             if self.train_log is not None:
                 self.train_log.write(row)
+                _scalars(self.tensorboard, "train", row, self.counter.forward)
             out_of_time = deadline is not None and time.time() >= deadline
             if (every and self.epoch % every == 0) or self.epoch == epochs or out_of_time:
                 self._eval_point()
