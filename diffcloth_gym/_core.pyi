@@ -124,10 +124,14 @@ class Simulator:
 class Batch:
     """N simulators sharing one model (one factorization), stepped in parallel; arrays carry the member index first."""
 
-    def __init__(self, sim: Simulator, size: int) -> None:
-        """`size` simulators on `sim`'s model and solver settings, at the rest state, not recording."""
+    def __init__(self, sim: Simulator, size: int, threads: int | None = None) -> None:
+        """`size` simulators on `sim`'s model and solver settings, at the rest state, not recording;
+        `threads`: a thread pool of the batch's own with that many threads (default rayon's global pool)."""
     def __len__(self) -> int:
         """Number of members."""
+    @property
+    def threads(self) -> int:
+        """Threads a batched step runs on."""
     def reset(
         self,
         index: int,
