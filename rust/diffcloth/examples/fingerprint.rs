@@ -30,7 +30,8 @@ fn main() {
         let mut cfg = SceneConfig::from_toml_file(&path).unwrap();
         cfg.solver.parallel = false;
         if let Some(polish) = std::env::args().nth(3) {
-            cfg.solver.polish = diffcloth::Polish::from_name(&polish).expect("polish: none or newton");
+            cfg.solver.polish =
+                diffcloth::Polish::from_name(&polish).expect("polish: none or newton");
         }
         for recorded in [false, true] {
             let mut sim = Simulator::new(&cfg).unwrap();

@@ -55,6 +55,7 @@ fn main() {
             attachment_targets: Some(&targets),
             ..Default::default()
         };
+        let (x_prev, v_prev) = (sim.positions().to_vec(), sim.velocities().to_vec());
         let exact = reference.as_mut().map(|r| {
             r.reset(Some(sim.positions()), Some(sim.velocities()))
                 .unwrap();
@@ -68,6 +69,14 @@ fn main() {
                 .zip(sim.positions())
                 .map(|(a, b)| (a - b).norm())
                 .fold(0.0, f64::max);
+            if e > 1e-4 {
+                let r = reference.as_mut().unwrap();
+                r.reset(Some(&x_prev), Some(&v_prev)).unwrap();
+                r.prepare(input).unwrap();
+                let (e_ref, _) = r.step_objective(&exact);
+                let (e_sim, _) = r.step_objective(sim.positions());
+                eprintln!("step {n}: one-step error {e:.2e}, E reference {e_ref:.12e} E this {e_sim:.12e}");
+            }
             err_max = err_max.max(e);
             err_sum += e;
             errs.push(e);

@@ -324,7 +324,8 @@ pub struct SolverSettings {
     pub history: usize,
     /// Parallel local step for large meshes (default true).
     pub parallel: bool,
-    /// What finishes a step near its solution (default: none).
+    /// What finishes a step near its solution (default: none). `newton` is measured in the
+    /// README (Hat: far smaller one-step error at equal tolerance, about equal time).
     pub polish: Polish,
 }
 

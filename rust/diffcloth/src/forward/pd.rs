@@ -102,6 +102,10 @@ impl Simulator {
     /// steps escape the same way (the Hat sliding off the head: 9 % -> 3 % of steps at the
     /// iteration cap); there E leaves out the contact forces, which only the fixed point
     /// must satisfy.
+    ///
+    /// Polish (`solver.polish = "newton"`): once the update is below `newton::POLISH_START`
+    /// and no contact pushes, trust-region Newton steps take over (`newton.rs`); the stopping
+    /// test is unchanged.
     pub(super) fn solve_pd(&mut self) -> StepStats {
         self.work.iterate.copy_from_slice(&self.work.y);
         self.work.anderson.reset();
