@@ -195,7 +195,7 @@ class Simulator:
 
     def solver(self) -> dict:
         """Accuracy knobs of every step, recorded or not: max_iterations, tolerance,
-        acceleration, history, parallel."""
+        acceleration, history, parallel, polish."""
         return self._core.solver()
 
     def set_solver(self, **settings: Any) -> None:

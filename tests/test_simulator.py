@@ -60,6 +60,18 @@ def test_set_params_and_solver(wind):
     assert stats["iterations"] <= 50
 
 
+def test_newton_polish_is_a_solver_setting(wind):
+    assert wind.solver()["polish"] == "none"
+    wind.set_solver(polish="newton", tolerance=1e-10, max_iterations=2000)
+    assert wind.solver()["polish"] == "newton"
+    for _ in range(5):
+        assert wind.step()["converged"]
+    assert wind.profile()["newton_steps"] > 0
+    with pytest.raises(diffcloth_gym.ParameterError, match="polish"):
+        wind.set_solver(polish="lbfgs")
+    assert wind.solver()["polish"] == "newton"
+
+
 @pytest.mark.parametrize(
     "mutate, needle",
     [

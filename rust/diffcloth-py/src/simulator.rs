@@ -7,7 +7,7 @@ use crate::conv::{
 };
 use crate::errors::{guarded, InputError, ParameterError};
 use diffcloth::{
-    Acceleration, Cancel, Param, ParamKind, ParamValue, Preset, SceneConfig, Simulator,
+    Acceleration, Cancel, Param, ParamKind, ParamValue, Polish, Preset, SceneConfig, Simulator,
     SolverSettings, StepInput, StepStats, Vec3,
 };
 use numpy::{PyArray2, PyReadonlyArray2, PyReadonlyArray3};
@@ -185,11 +185,12 @@ impl PySimulator {
         d.set_item("acceleration", s.acceleration.name())?;
         d.set_item("history", s.history)?;
         d.set_item("parallel", s.parallel)?;
+        d.set_item("polish", s.polish.name())?;
         Ok(d)
     }
 
     /// Updates solver settings by name (preset, max_iterations, tolerance, acceleration,
-    /// history, parallel). A preset is applied first, explicit settings over it. Recorded and
+    /// history, parallel, polish). A preset is applied first, explicit settings over it. Recorded and
     /// plain steps share every setting: the retired `record_tolerance` and
     /// `record_max_iterations` are accepted only equal to `tolerance` and `max_iterations`.
     #[pyo3(signature = (**kwargs))]
@@ -227,10 +228,14 @@ impl PySimulator {
                         let a = Acceleration::from_name(&a).ok_or_else(|| bad("\"anderson\" or \"none\""))?;
                         s.acceleration = a;
                     }
+                    "polish" => {
+                        let a: String = value.extract().map_err(|_| bad("\"newton\" or \"none\""))?;
+                        s.polish = Polish::from_name(&a).ok_or_else(|| bad("\"newton\" or \"none\""))?;
+                    }
                     other => {
                         return Err(ParameterError::new_err(format!(
                             "unknown solver setting {other:?}; known: preset, max_iterations, tolerance, \
-                             acceleration, history, parallel"
+                             acceleration, history, parallel, polish"
                         )))
                     }
                 }

@@ -2,7 +2,7 @@
 //! a bit-exact checksum of the trajectory, plus the adjoint's iteration counts and gradient
 //! checksum, recorded and plain. Two builds that print the same lines simulate the same thing
 //! (used to prove that a refactor changed no behaviour):
-//! `cargo run --release --example fingerprint [CONFIG_DIR] [STEPS]`.
+//! `cargo run --release --example fingerprint [CONFIG_DIR] [STEPS] [POLISH]`.
 use diffcloth::{BackwardOptions, SceneConfig, Simulator, StepInput, Vec3};
 
 /// Order-sensitive checksum of the exact bits of a sequence of vectors.
@@ -29,6 +29,10 @@ fn main() {
         let name = path.file_stem().unwrap().to_string_lossy().to_string();
         let mut cfg = SceneConfig::from_toml_file(&path).unwrap();
         cfg.solver.parallel = false;
+        if let Some(polish) = std::env::args().nth(3) {
+            cfg.solver.polish =
+                diffcloth::Polish::from_name(&polish).expect("polish: none or newton");
+        }
         for recorded in [false, true] {
             let mut sim = Simulator::new(&cfg).unwrap();
             sim.set_recording(recorded);
@@ -44,6 +48,12 @@ fn main() {
                 p.acceleration_stalls, p.redetections, p.contacts_take_off, p.contacts_stick,
                 p.contacts_slip
             );
+            if cfg.solver.polish != diffcloth::Polish::None {
+                line += &format!(
+                    " newton {} rejected {} cg {}",
+                    p.newton_steps, p.newton_rejections, p.newton_cg_iterations
+                );
+            }
             if recorded {
                 let n = sim.num_nodes();
                 let dl_dx: Vec<Vec<Vec3>> = (0..steps)

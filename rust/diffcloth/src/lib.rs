@@ -34,7 +34,9 @@ pub use config::{BendModel, Effect, SceneConfig};
 pub use contact::{Branch, BranchCounts, Contact, ContactKind};
 pub use error::{Error, Result};
 pub use forward::{Model, Overlaps, Simulator, StepInput, StepStats};
-pub use params::{Acceleration, Param, ParamKind, ParamValue, Params, Preset, SolverSettings};
+pub use params::{
+    Acceleration, Param, ParamKind, ParamValue, Params, Polish, Preset, SolverSettings,
+};
 pub use profile::Profile;
 
 /// Use one thread inside faer: its parallel sparse kernels are slower than sequential at cloth

@@ -17,6 +17,13 @@ pub struct Profile {
     pub acceleration_stalls: u64,
     /// Iterations that took a scaled step `x + a (G(x) - x)`, `a > 1`, to leave a saddle.
     pub escape_steps: u64,
+    /// Newton polish (`solver.polish = "newton"`): accepted steps, rejected attempts, their
+    /// PCG iterations, and the time spent linearizing and in PCG (the trial's evaluation is
+    /// in local and global).
+    pub newton_steps: u64,
+    pub newton_rejections: u64,
+    pub newton_cg_iterations: u64,
+    pub newton: Duration,
     /// Local step: projections onto each constraint set and the right-hand side gather.
     pub local: Duration,
     /// Global step: the prefactored sparse solve.
@@ -55,6 +62,10 @@ impl Profile {
             ),
             ("acceleration_stalls", self.acceleration_stalls as f64),
             ("escape_steps", self.escape_steps as f64),
+            ("newton_steps", self.newton_steps as f64),
+            ("newton_rejections", self.newton_rejections as f64),
+            ("newton_cg_iterations", self.newton_cg_iterations as f64),
+            ("newton_s", self.newton.as_secs_f64()),
             ("refactorizations", self.refactorizations as f64),
             ("redetections", self.redetections as f64),
             ("local_s", self.local.as_secs_f64()),

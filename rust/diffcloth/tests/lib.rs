@@ -12,6 +12,7 @@ mod gradient_check;
 mod gradients;
 mod malformed_inputs;
 mod model_sharing;
+mod newton_polish;
 mod pd_solver;
 mod scenes;
 mod tape;

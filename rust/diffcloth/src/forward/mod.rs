@@ -22,6 +22,7 @@ use std::sync::Arc;
 mod detection;
 mod diagnostics;
 mod model;
+mod newton;
 mod overlap;
 mod pd;
 mod registry;
@@ -94,6 +95,7 @@ pub(crate) struct Workspace {
     pub(crate) update: Vec<Vec3>,
     pub(crate) extrapolated: Vec<Vec3>,
     pub(crate) anderson: Anderson,
+    pub(crate) newton: newton::NewtonWork,
     /// Each constraint set's projections (in `Model::constraint_sets` order).
     pub(crate) projections: Vec<Projections>,
     /// Work rows of the factor's solve.
@@ -119,6 +121,7 @@ impl Workspace {
             update: zeros.clone(),
             extrapolated: zeros.clone(),
             anderson: Anderson::new(history, n),
+            newton: newton::NewtonWork::new(model),
             projections: model
                 .constraint_sets()
                 .map(|c| c.new_projections())

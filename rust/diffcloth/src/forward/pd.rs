@@ -3,7 +3,7 @@
 
 use super::safeguards::{Accepted, AndersonOutcome, Progress};
 use super::{Simulator, StepStats};
-use crate::params::Acceleration;
+use crate::params::{Acceleration, Polish};
 use crate::profile::timed;
 use crate::Vec3;
 use std::time::Instant;
@@ -102,6 +102,10 @@ impl Simulator {
     /// steps escape the same way (the Hat sliding off the head: 9 % -> 3 % of steps at the
     /// iteration cap); there E leaves out the contact forces, which only the fixed point
     /// must satisfy.
+    ///
+    /// Polish (`solver.polish = "newton"`): once the update is below `newton::POLISH_START`
+    /// and no contact pushes, trust-region Newton steps take over (`newton.rs`); the stopping
+    /// test is unchanged.
     pub(super) fn solve_pd(&mut self) -> StepStats {
         self.work.iterate.copy_from_slice(&self.work.y);
         self.work.anderson.reset();
@@ -117,11 +121,18 @@ impl Simulator {
         self.record(energy, residual);
         let history = self.work.anderson.history();
         let accelerate = self.solver.acceleration == Acceleration::Anderson;
+        let polish = self.solver.polish == Polish::Newton;
         let mut p = Progress::new(energy, residual, accelerate, history);
         while p.residual > tol && p.iterations < max_it {
             // While no contact pushes (all take off at the iterate), E is the exact objective
             // and the energy guard applies; the residual guard only where contact forces act.
             let energy_guard = self.work.contacts.all_take_off();
+            if polish && energy_guard && p.escape_scale == 1.0 && p.residual <= p.newton_below {
+                if self.try_newton(&mut p) {
+                    self.record(p.energy, p.residual);
+                }
+                continue;
+            }
             let previous = (p.residual, p.energy);
             let mut accepted = None;
             if p.escape_scale > 1.0 {

@@ -22,6 +22,9 @@ pub(super) struct Progress {
     best_residual: f64,
     best_at: usize,
     stall_window: usize,
+    /// Newton polish: tried while the update is below this (lowered after a rejection).
+    pub(super) newton_below: f64,
+    pub(super) trust: super::newton::TrustRegion,
 }
 
 impl Progress {
@@ -37,6 +40,8 @@ impl Progress {
             best_residual: residual,
             best_at: 1,
             stall_window: 2 * history + 4,
+            newton_below: super::newton::POLISH_START,
+            trust: Default::default(),
         }
     }
 

@@ -78,7 +78,8 @@ impl Simulator {
         let staged = (p.local - p0.local)
             + (p.global - p0.global)
             + (p.detection - p0.detection)
-            + (p.contact_solve - p0.contact_solve);
+            + (p.contact_solve - p0.contact_solve)
+            + (p.newton - p0.newton);
         p.other += total.saturating_sub(staged);
         Ok(stats)
     }
