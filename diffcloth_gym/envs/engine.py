@@ -60,8 +60,7 @@ def build_scene(task_class: type[ClothTask], task_config: Mapping[str, Any],
     scene = copy.deepcopy(scene)
     for table, values in task_class.scene_overrides(task_config).items():
         scene.setdefault(table, {}).update(values)
-    settings = dict(scene.get("solver", {}))
-    settings.update(solver or {})
+    settings = {**scene.get("solver", {}), **task_class.solver_defaults, **(solver or {})}
     tol = settings.pop("tolerance", DEFAULT_TOLERANCE)
     cap = max(settings.pop("max_iterations", 300), settings.pop("record_max_iterations", 2000))
     settings.pop("record_tolerance", None)

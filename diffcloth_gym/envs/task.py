@@ -57,6 +57,10 @@ class ClothTask(abc.ABC):
         """The task's arguments and their defaults (documented in the env's docstring)."""
         return {}
 
+    #: Solver settings the env uses unless its ``solver`` argument says otherwise (e.g. a
+    #: polish the task's scene converges badly without); the tolerance is the engine's.
+    solver_defaults: dict[str, Any] = {}
+
     @classmethod
     def scene_overrides(cls, config: Mapping[str, Any]) -> dict[str, Any]:
         """Changes to the scene config that the task's arguments ask for (e.g. a mesh
