@@ -113,7 +113,8 @@ def run_task(name: str, budget: int, seeds: list[int], spread: float, progress: 
             print(f"{name} {method:9s} seed {seed}: loss {run.initial_loss:.4g} -> {run.best_loss:.4g} in "
                   f"{run.steps_used} steps (converged at {d['steps_to_converge']}; {run.evaluations} evaluations, "
                   f"{run.seconds:.0f} s; {run.stop})", flush=True)
-    return {"task": name, "params": task.param.size, "names": task.param.names, "budget": budget, "seeds": seeds,
+    return {"task": name, "params": task.param.size, "names": task.param.names,
+            "bounds": [b.tolist() for b in task.param.bounds], "budget": budget, "seeds": seeds,
             "spread": spread, "steps": task.steps, "nodes": task.sim.num_nodes, "notes": task.notes,
             "truth": None if task.truth is None else task.truth.tolist(), "runs": runs,
             "minutes": (time.time() - t0) / 60}
@@ -146,13 +147,23 @@ def rows_for(res: dict) -> tuple[dict, dict, list[dict]]:
           " / ".join(str(paper["steps"][m]) for m in by)}
     ident = []
     if res["truth"] is not None:
+        lo, hi = (np.asarray(b) for b in _bounds(res))
         for r in by["L-BFGS-B"] + by["CMA-ES"] + by["(1+1)-ES"]:
-            err = np.abs(np.asarray(r["best_theta"]) - np.asarray(res["truth"]))
+            err = np.abs(np.asarray(r["best_theta"]) - np.asarray(res["truth"])) / (hi - lo)
             ident.append({"task": name, "method": r["method"], "seed": r["seed"],
                           "start": _vec(r["start_theta"]), "recovered": _vec(r["best_theta"]),
-                          "truth": _vec(res["truth"]), "max |error|": float(err.max()),
+                          "truth": _vec(res["truth"]), "max error, % of range": 100.0 * float(err.max()),
                           "loss %": 100.0 * r["best_loss"] / r["initial_loss"]})
     return t2, t3, ident
+
+
+def _bounds(res: dict):
+    """The task's bounds (results written before they were stored: from the task itself)."""
+    if "bounds" not in res:
+        from diffcloth_gym.optim import TASKS
+
+        res["bounds"] = [b.tolist() for b in TASKS[res["task"]]().param.bounds]
+    return res["bounds"]
 
 
 def _vec(v) -> str:
