@@ -161,3 +161,13 @@ def test_fixed_inputs_stack_beside_physical_parameters():
     with pytest.raises(InputError, match="targets"):
         Stack([PhysicalParams(task.sim, {"density": (0.1, 1.0)}), Fixed(targets=np.zeros((2, 24, 3)))]).inputs(
             np.array([0.3]), 4)
+
+
+def test_cmaes_runs_on_a_one_parameter_task():
+    from diffcloth_gym.optim import run_cmaes
+
+    # cma 4.x raised "not yet initialized (dimension needed)" at its first tell in 1-D.
+    task = TASKS["sphere"](steps=60, rows=9)
+    obj = task.objective()
+    run = run_cmaes(obj, obj.to_unit([0.7]), budget=1200, show_progress=False)
+    assert run.steps_used <= 1200 and run.evaluations >= 10 and run.best_loss < 0.5 * run.initial_loss
