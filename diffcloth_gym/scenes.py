@@ -70,9 +70,16 @@ def _parse(data: bytes, origin: Any) -> dict:
 
 def load_scene(config: str | Path | Mapping[str, Any], **mesh: Any) -> dict:
     """A scene config as a fresh dict (safe to modify): a shipped scene name, a TOML path or a
-    dict (copied). ``mesh`` keywords override entries of its ``[mesh]`` table, e.g. a grid's
+    dict (copied; a relative OBJ mesh path is made absolute against the file's folder). ``mesh`` keywords override entries of its ``[mesh]`` table, e.g. a grid's
     resolution: ``load_scene("wind", rows=24, cols=24)``."""
-    cfg = copy.deepcopy(load_config(config)[0])
+    cfg, base = load_config(config)
+    cfg = copy.deepcopy(cfg)
+    # A relative OBJ path is relative to the file's folder: made absolute, so the dict builds
+    # the same mesh from any working folder (a dict's own base is the working folder).
+    m = cfg.get("mesh")
+    if isinstance(m, dict) and m.get("kind") == "obj" and isinstance(m.get("path"), str) \
+            and not Path(m["path"]).is_absolute():
+        m["path"] = str(base / m["path"])
     if mesh:
         cfg.setdefault("mesh", {}).update(mesh)
     return cfg

@@ -37,6 +37,9 @@ def test_an_installed_wheel_finds_its_scenes(tmp_path):
         "assert 'hat' in scene_names(), scene_names()\n"
         "s = Simulator.from_config('hat')\n"
         "s.step()\n"
+        # Package data beyond TOMLs: the task scenes' procedural OBJ meshes.
+        "Simulator.from_config('dress').step()\n"
+        "Simulator.from_config('tshirt').step()\n"
         "print(s.num_nodes)\n"
     )
     # The wheel's copy comes first on the path; the checkout is not on it (cwd elsewhere).

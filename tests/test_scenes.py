@@ -8,7 +8,7 @@ import diffcloth_gym
 from diffcloth_gym import ConfigError, Simulator
 from diffcloth_gym.scenes import CONFIG_DIR, CONTACT_EFFECTS, contact_free, load_scene, scene_names
 
-SHIPPED = ["bowl", "hat", "napkin", "pyramid", "slope", "sock", "sphere", "wind"]
+SHIPPED = ["bowl", "dress", "flag", "hat", "napkin", "pyramid", "slope", "sock", "sphere", "sphere_mu", "tshirt", "wind"]
 
 
 def test_shipped_scenes_are_package_data():

@@ -13,7 +13,8 @@ def run_cmaes(objective: Objective, u0: np.ndarray, budget: int | None, seed: in
     """Evaluates ``u0`` (so every method's history starts at the same loss), then runs CMA-ES
     with step size ``sigma0`` (a fraction of each range) and the ``cma`` default population
     ``4 + 3 ln d`` until it stops or the budget runs out (a generation cut short by the budget
-    is not told to the strategy). ``cma``'s own seed is ``seed + 1`` (its 0 means random)."""
+    is not told to the strategy). ``cma``'s own seed is ``seed + 1`` (its 0 means random).
+    One-dimensional problems (the sphere's mu) run too, without cma's bound-derived std cap."""
     import cma
 
     objective.budget = budget
@@ -22,6 +23,11 @@ def run_cmaes(objective: Objective, u0: np.ndarray, budget: int | None, seed: in
             "tolx": 1e-14}
     if popsize:
         opts["popsize"] = popsize
+    if len(u0) == 1:
+        # cma 4.x derives a maximal std from the bounds, and enforcing it in one dimension
+        # raises "not yet initialized (dimension needed)" at the first tell (pycma issues 86,
+        # 302: 1-D is unsupported): no cap there (sigma0 0.25 of the unit range stays sane).
+        opts["maxstd"] = np.inf
     stop = "budget"
     with progress(objective, f"CMA-ES seed {seed}", show_progress):
         try:

@@ -145,3 +145,49 @@ class SmoothL1(Loss):
         v = np.where(small, 0.5 * d * d / self.beta, a - 0.5 * self.beta)
         g = np.where(small, d / self.beta, np.sign(d))
         return float(v.sum()), {self.step: g}
+
+
+class HeightMatch(Loss):
+    """``sum_p (x_step[p, axis] - height)^2`` over the nodes ``nodes`` (the paper's Dress loss,
+    Eqn. 34: the hemline's heights against the height of the target apex angle; ``axis`` 1 is
+    y, up)."""
+
+    def __init__(self, nodes, height: float, step: int = -1, axis: int = 1):
+        self.nodes = np.asarray(nodes, dtype=np.int64)
+        if self.nodes.ndim != 1 or len(self.nodes) == 0:
+            raise InputError("nodes must be a non-empty list of node indices")
+        if not np.isfinite(height):
+            raise InputError(f"height must be finite, got {height!r}")
+        if axis not in (0, 1, 2):
+            raise InputError(f"axis must be 0, 1 or 2, got {axis!r}")
+        self.height, self.step, self.axis = float(height), step, axis
+
+    def __call__(self, xs):
+        d = xs[self.step][self.nodes, self.axis] - self.height
+        full = np.zeros_like(xs[self.step])
+        np.add.at(full[:, self.axis], self.nodes, 2.0 * d)
+        return float(np.sum(d * d)), {self.step: full}
+
+
+class GroupKeypoints(Loss):
+    """``sum_j |mean(x_step[groups_j]) - points_j|``: keypoint distances where each keypoint is
+    the centroid of a group of nodes (the Sock's Eqn. 33 as ``Sock-v0`` defines its keypoints);
+    ``groups`` (m, k) node indices, ``points`` (m, 3)."""
+
+    def __init__(self, groups, points, step: int = -1):
+        self.groups = np.asarray(groups, dtype=np.int64)
+        if self.groups.ndim != 2:
+            raise InputError(f"groups must be an (m, k) array of node indices, got shape {self.groups.shape}")
+        self.points = _target("points", points, (len(self.groups), 3))
+        self.step = step
+
+    def __call__(self, xs):
+        x = xs[self.step]
+        c = x[self.groups].mean(axis=1)
+        d = c - self.points
+        r = np.linalg.norm(d, axis=1)
+        u = np.where(r[:, None] > 0, d / np.maximum(r, 1e-300)[:, None], 0.0) / self.groups.shape[1]
+        full = np.zeros_like(x)
+        for j in range(len(self.groups)):
+            np.add.at(full, self.groups[j], u[j])
+        return float(r.sum()), {self.step: full}

@@ -76,6 +76,36 @@ def check_bounds(name: str, lo, hi, size: int) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
+class Fixed:
+    """Inputs that are part of a task, not of the optimization (a twirl's attachment targets,
+    a fixed force field): no parameters (``size`` 0); stack it beside the parameterization
+    being optimized, ``Stack([PhysicalParams(...), Fixed(targets=...)])``. ``targets`` (N, k, 3)
+    and ``forces`` (N, n, 3) must cover the rollout's steps."""
+
+    def __init__(self, targets=None, forces=None):
+        self.targets = None if targets is None else np.asarray(targets, dtype=np.float64)
+        self.forces = None if forces is None else np.asarray(forces, dtype=np.float64)
+        for name, a in (("targets", self.targets), ("forces", self.forces)):
+            if a is not None and (a.ndim != 3 or a.shape[2] != 3 or not np.all(np.isfinite(a))):
+                raise InputError(f"{name} must be a finite (N, k, 3) array, got shape {a.shape}")
+        self.size = 0
+        self.names: list[str] = []
+
+    @property
+    def bounds(self):
+        return np.zeros(0), np.zeros(0)
+
+    def inputs(self, theta, steps: int) -> Inputs:
+        for name, a in (("targets", self.targets), ("forces", self.forces)):
+            if a is not None and len(a) < steps:
+                raise InputError(f"Fixed {name} cover {len(a)} steps, the rollout has {steps}")
+        return Inputs(targets=None if self.targets is None else self.targets[:steps],
+                      forces=None if self.forces is None else self.forces[:steps])
+
+    def chain(self, theta, grads: dict, steps: int) -> np.ndarray:
+        return np.zeros(0)
+
+
 class Stack:
     """Several parameterizations side by side: ``theta`` is their vectors concatenated (e.g. a
     trajectory and a friction coefficient). Inputs are merged; two parts may not drive the same

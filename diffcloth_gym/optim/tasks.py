@@ -3,7 +3,8 @@ and a horizon, ready for :class:`~diffcloth_gym.optim.Objective` and the drivers
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -24,9 +25,43 @@ class Task:
     steps: int
     #: The parameters that generated the target motion, when known (identification tasks).
     truth: np.ndarray | None = None
+    #: The rollout's start (None: the rest shape, at rest).
+    x0: np.ndarray | None = None
+    v0: np.ndarray | None = None
+    #: Task-specific readouts of a rollout's positions (N, n, 3), e.g. the dress's apex angle.
+    measure: Callable[[np.ndarray], dict] | None = None
+    #: How this task differs from the paper's (mesh, loss, target), for reports.
+    notes: str = ""
+    extra: dict = field(default_factory=dict)
 
     def objective(self, **kwargs) -> Objective:
+        kwargs.setdefault("x0", self.x0)
+        kwargs.setdefault("v0", self.v0)
         return Objective(self.sim, self.param, self.loss, self.steps, **kwargs)
+
+
+def task_scene(name: str, **mesh) -> dict:
+    """A shipped scene's config (:func:`~diffcloth_gym.scenes.load_scene`: a relative OBJ mesh
+    path comes back absolute, so the dict builds from any working folder)."""
+    return load_scene(name, **mesh)
+
+
+def synthesize(sim: Simulator, param: Parameterization, theta, steps: int, x0=None, v0=None) -> np.ndarray:
+    """The positions (steps, n, 3) of a rollout under ``theta`` at the ``gradient`` preset (the
+    accuracy every objective evaluation runs at, so a perfect fit has loss 0): the target
+    motion of an identification task."""
+    sim.set_solver(preset="gradient")
+    sim.set_recording(False)
+    inp = param.inputs(np.asarray(theta, dtype=np.float64), steps)
+    if inp.params:
+        sim.set_params(**inp.params)
+    sim.reset(x0, v0)
+    out = np.empty((steps, sim.num_nodes, 3))
+    for k in range(steps):
+        sim.step(attachment_targets=None if inp.targets is None else inp.targets[k],
+                 external_forces=None if inp.forces is None else inp.forces[k])
+        out[k] = sim.positions
+    return out
 
 
 def flying_napkin(resolution: int = 10, steps: int = 50, bound: float = 10.0) -> Task:
@@ -53,12 +88,6 @@ def flying_napkin(resolution: int = 10, steps: int = 50, bound: float = 10.0) ->
     truth[:, 0] = 0.5 - 1.0 * r[:, 2]
     truth[:, 1] = 1.5
     truth[:, 2] = 0.5 + 1.0 * r[:, 0]
-    sim.set_solver(preset="gradient")
-    inputs = param.inputs(truth.ravel(), steps)
-    sim.reset()
-    target = np.empty((steps, n, 3))
-    for k in range(steps):
-        sim.step(external_forces=inputs.forces[k])
-        target[k] = sim.positions
+    target = synthesize(sim, param, truth.ravel(), steps)
     loss = TrajectoryMatch(target, squared=True, mean=True)
     return Task(f"napkin{resolution}x{resolution}", sim, param, loss, steps, truth.ravel())
