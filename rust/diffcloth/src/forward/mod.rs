@@ -64,6 +64,11 @@ pub struct Simulator {
     /// The last completed step's contacts: the workspace's are overwritten by a step that
     /// then fails, and `contacts()` must agree with `last_step()` after a rollback.
     last_contacts: Vec<Contact>,
+    /// Whether this simulator's own step may split its work across threads (with
+    /// `solver.parallel`). A batch with at least as many members as threads turns it off:
+    /// the members already fill the threads, and splitting each small step again only adds
+    /// scheduling. The results are bitwise the same either way.
+    pub(crate) split_work: bool,
 }
 
 /// What changes every step: positions, velocities, time and the attachment targets.
@@ -170,6 +175,7 @@ impl Simulator {
             profile: Profile::default(),
             last: StepStats::default(),
             last_contacts: Vec::new(),
+            split_work: true,
         }
     }
 

@@ -14,7 +14,7 @@ impl Simulator {
     /// `E(x) = |x - y|_M^2 / (2 h^2) + sum_i w_i / 2 |A_i x - p_i|^2`.
     pub(super) fn local_step(&mut self, which: Buffer) -> f64 {
         let start = Instant::now();
-        let parallel = self.solver.parallel;
+        let parallel = self.solver.parallel && self.split_work;
         let x = std::mem::take(self.buffer(which));
         let mut rhs = std::mem::take(&mut self.work.update);
         rhs.copy_from_slice(&self.work.inertia_rhs);
