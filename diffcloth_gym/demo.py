@@ -2,7 +2,7 @@
 paper's controller with analytic policy gradients (APG) through the simulator and with PPO
 (stable-baselines3) on ``DiffCloth/Hat-v0``, evaluates both on the env's fixed test starts,
 prints a table and writes a plot of test loss vs simulated time steps and a GIF of the APG
-policy (about 10 minutes on 2 cores).
+policy (about 5 minutes on a quiet 2-core machine, at most 10).
 
 Run with ``scripts/demo`` (or ``python -m diffcloth_gym.demo``). The full-budget comparison
 is ``python scripts/compare_hat.py --budget full`` (see the README).
