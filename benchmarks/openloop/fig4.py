@@ -173,9 +173,12 @@ def main(argv: list[str] | None = None) -> int:
         del d["history"]
         return d
 
-    (args.out / "openloop.json").write_text(json.dumps(
-        {"meta": meta, "fig4": {"summary": summary, "speedup": rows,
-                                "runs": [dict(compact(r), task=t, dof=d) for t, d, r in runs]}}, separators=(",", ":")))
+    # Other studies' keys (the table's) stay.
+    path = args.out / "openloop.json"
+    data = json.loads(path.read_text()) if path.exists() else {}
+    data.update(meta=meta, fig4={"summary": summary, "speedup": rows,
+                                 "runs": [dict(compact(r), task=t, dof=d) for t, d, r in runs]})
+    path.write_text(json.dumps(data, separators=(",", ":")))
     (args.out / "openloop.md").write_text(markdown(meta, summary, rows))
     print(f"wrote {args.out / 'openloop.md'}")
     return 0
