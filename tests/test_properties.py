@@ -184,7 +184,7 @@ N, K = 16, 2
 PARAM_NAMES = ["h", "density", "k_stretch", "k_bend", "k_attach", "gravity", "wind_direction",
                "wind_omega", "wind_phi", "colour"]
 SOLVER_KEYS = ["max_iterations", "tolerance", "record_tolerance", "record_max_iterations",
-               "acceleration", "history", "parallel", "speed"]
+               "acceleration", "history", "parallel", "speed", "polish"]
 # Iteration caps beyond a few thousand are valid but would make a step take seconds.
 small_int = st.one_of(st.integers(1, 200), st.sampled_from([0, -1, 2**40, 10**7, 2**64]))
 
@@ -238,7 +238,7 @@ class TwinMachine(RuleBasedStateMachine):
         self.both(lambda s: s.set_params(**{name: value}))
 
     @rule(key=st.sampled_from(SOLVER_KEYS), value=st.one_of(
-        small_int, number, st.sampled_from(["anderson", "none", "fast", True, False]), anything))
+        small_int, number, st.sampled_from(["anderson", "none", "newton", "fast", True, False]), anything))
     def set_solver(self, key, value):
         if key in ("max_iterations", "record_max_iterations") and isinstance(value, int) and 1000 < value <= 10**6:
             return  # valid, but slow
