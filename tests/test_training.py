@@ -103,6 +103,31 @@ def test_ppo_runs_end_to_end_counts_its_steps_and_resumes_bitwise(tmp_path):
         assert torch.equal(p, q)
 
 
+def test_ppo_killed_between_evaluations_resumes_bitwise_and_a_late_run_does_not_start(tmp_path):
+    import time
+
+    from diffcloth_gym.training.ppo import PPOTrainer
+
+    cfg = ppo_cfg(eval_every=400)  # two rollouts of 200 steps per evaluation
+    full = PPOTrainer(cfg, tmp_path / "full", progress=False, eval_starts=STARTS[:1])
+    s = full.train()
+    part = PPOTrainer(cfg, tmp_path / "part", progress=False, eval_starts=STARTS[:1])
+    p = part.train(max_rollouts=1)  # "killed" after the first rollout's checkpoint, before an evaluation
+    assert p["num_timesteps"] == 200 and [q["steps"] for q in p["curve"]] == [0] and not p["complete"]
+    resumed = PPOTrainer(cfg, tmp_path / "part", progress=False, eval_starts=STARTS[:1])
+    assert resumed.model.num_timesteps == 200
+    r = resumed.train()
+    assert [q["steps"] for q in r["curve"]] == [0, 400]
+    assert [q["test_loss"] for q in r["curve"]] == [q["test_loss"] for q in s["curve"]]
+    for a, b in zip(full.model.policy.parameters(), resumed.model.policy.parameters()):
+        assert torch.equal(a, b)
+    late = PPOTrainer(cfg, tmp_path / "late", progress=False, eval_starts=STARTS[:1])
+    summary = late.train(deadline=time.time() - 1)
+    assert summary["curve"] == [] and summary["final_test_loss"] is None and summary["forward"] == 0
+    late_apg = APGTrainer(apg_cfg(), tmp_path / "late_apg", progress=False, eval_starts=STARTS[:1])
+    assert late_apg.train(deadline=time.time() - 1)["curve"] == []
+
+
 def test_compare_writes_results_and_marks_a_stopped_run_partial(tmp_path):
     import json
 

@@ -62,7 +62,8 @@ def steps_to_reach(curve: Sequence[Mapping[str, Any]], target: float | None) -> 
 def run(budget: str | Mapping[str, Any] = "budget_demo", out: str | Path = "out/demo",
         runs: str | Path | None = None, seeds: Sequence[int] | None = None, methods: Sequence[str] | None = None,
         max_minutes: float | None = None, resume: bool = True, progress: bool = True, gif: bool = True,
-        name: str = "hat_controller", command: str | None = None) -> dict[str, Any]:
+        name: str = "hat_controller", command: str | None = None,
+        resume_command: str | None = None) -> dict[str, Any]:
     """Runs (or resumes) every method and seed of ``budget``; writes ``out/name.{json,md,png}``
     and ``out/name.gif``. ``max_minutes`` stops training (after a checkpoint) when the time is
     up; the results then say ``partial`` and the same command resumes."""
@@ -91,6 +92,7 @@ def run(budget: str | Mapping[str, Any] = "budget_demo", out: str | Path = "out/
     results = summarize(budget, budget_name, summaries, seeds, methods)
     results["wall_s"] = time.perf_counter() - t0
     results["command"] = command
+    results["resume_command"] = resume_command
     out.mkdir(parents=True, exist_ok=True)
     (out / f"{name}.json").write_text(json.dumps(results, indent=1, default=_json))
     plot(results, out / f"{name}.png")
@@ -110,6 +112,10 @@ def _json(o: Any) -> Any:
     raise TypeError(type(o).__name__)
 
 
+def _mean(xs: Sequence[float]) -> float | None:
+    return float(np.mean(xs)) if xs else None
+
+
 def summarize(budget: Mapping[str, Any], budget_name: str, summaries: list[dict], seeds, methods) -> dict[str, Any]:
     apg_final = [s["final_test_loss"] for s in summaries if s["method"] == "apg" and s["final_test_loss"] is not None]
     target = 1.1 * float(np.mean(apg_final)) if apg_final else None
@@ -119,8 +125,10 @@ def summarize(budget: Mapping[str, Any], budget_name: str, summaries: list[dict]
     for m in methods:
         ss = [s for s in summaries if s["method"] == m]
         reach = [s["reach_1.1x_apg"]["steps"] for s in ss if s["reach_1.1x_apg"]]
-        per_method[m] = {"final_test_loss_mean": float(np.mean([s["final_test_loss"] for s in ss])),
-                         "success_rate_mean": float(np.mean([s["success_rate"] for s in ss])),
+        # Runs not yet evaluated (a session's deadline came before they began) count nowhere.
+        done = [s for s in ss if s["final_test_loss"] is not None]
+        per_method[m] = {"final_test_loss_mean": _mean([s["final_test_loss"] for s in done]),
+                         "success_rate_mean": _mean([s["success_rate"] for s in done]),
                          "steps_mean": float(np.mean([s["forward"] for s in ss])),
                          "steps_to_1.1x_apg_mean": float(np.mean(reach)) if len(reach) == len(ss) else None,
                          "seeds_reaching": len(reach), "seeds": len(ss)}
@@ -184,7 +192,7 @@ def markdown(results: Mapping[str, Any], name: str) -> str:
     lines = [f"# {r['env_id']} controller: {_title(r['methods'])} ({r['budget']} budget)", ""]
     if r["partial"]:
         lines += ["**PARTIAL RUN**: at least one run stopped before its budget (checkpointed). "
-                  f"Resume with the same command: `{r.get('command') or 'scripts/compare_hat.py'}`.", ""]
+                  f"Resume with `{r.get('resume_command') or r.get('command') or 'scripts/compare_hat.py'}`.", ""]
     if r.get("command"):
         lines += [f"Command: `{r['command']}`", ""]
     lines += [f"Evaluated on {len(r['test_starts'])} of the env's TEST_STARTS with deterministic actions; "

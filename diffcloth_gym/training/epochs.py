@@ -215,11 +215,14 @@ class EpochTrainer:
     def train(self, epochs: int | None = None, deadline: float | None = None) -> dict[str, Any]:
         """Trains up to ``epochs`` in total (default the config's), evaluating every
         ``eval_every`` epochs and at the end; stops early (after a checkpoint, resumable) once
-        ``time.time()`` passes ``deadline``. Returns the run's summary."""
+        ``time.time()`` passes ``deadline`` (a run not yet begun does not start). Returns the
+        run's summary."""
         epochs = int(self.cfg["epochs"] if epochs is None else epochs)
         self.target_epochs = epochs
         every = int(self.cfg["eval_every"])
         if not self.curve:
+            if deadline is not None and time.time() >= deadline:
+                return self.summary()  # out of time before it began: not even its first evaluation
             self._eval_point()
             self.save()
         bar = tqdm(total=epochs, initial=self.epoch, desc=f"{self.method} seed {self.seed}",
@@ -231,8 +234,9 @@ class EpochTrainer:
             if self.train_log is not None:
                 self.train_log.write(row)
                 _scalars(self.tensorboard, "train", row, self.counter.forward)
-            out_of_time = deadline is not None and time.time() >= deadline
-            if (every and self.epoch % every == 0) or self.epoch == epochs or out_of_time:
+            # A deadline stops after the checkpoint without an extra evaluation: the curve of a
+            # run done in parts is the uninterrupted run's, and no session pays for an off-grid one.
+            if (every and self.epoch % every == 0) or self.epoch == epochs:
                 self._eval_point()
             self.save()
             bar.update(1)

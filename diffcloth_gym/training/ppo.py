@@ -2,9 +2,10 @@
 same policy size (MLP 64-64 tanh, for the Gaussian's mean and, separately, the value), reward
 = minus the step's loss (the env's own reward: the paper's fairness rule).
 
-Training runs in chunks of ``eval_every`` time steps (rounded up to whole rollouts); after
-each chunk the policy's mean action is evaluated on ``TEST_STARTS`` (the curve) and a
-checkpoint is written: the SB3 model (policy, Adam, ``num_timesteps``, last observation), the
+Training runs one rollout at a time; every ``eval_every`` time steps (rounded up to whole
+rollouts) the policy's mean action is evaluated on ``TEST_STARTS`` (the curve), and after every
+rollout a checkpoint is written (a session that stops loses at most one rollout): the SB3
+model (policy, Adam, ``num_timesteps``, last observation), the
 RNG states (torch samples the actions, numpy shuffles the minibatches), the adapter's start
 generators and the members' states, the step counts and the clock. With ``n_steps`` a
 multiple of the horizon every checkpoint falls on an episode boundary (all members just
@@ -156,25 +157,35 @@ class PPOTrainer:
         if self.eval_log is not None:
             self.eval_log.write(point)
 
-    def train(self, timesteps: int | None = None, deadline: float | None = None) -> dict[str, Any]:
-        """Trains up to ``timesteps`` in total (default the config's), whole rollouts; stops
-        early (after a checkpoint, resumable) once ``time.time()`` passes ``deadline``."""
+    def train(self, timesteps: int | None = None, deadline: float | None = None,
+              max_rollouts: int | None = None) -> dict[str, Any]:
+        """Trains up to ``timesteps`` in total (default the config's), whole rollouts,
+        evaluating every ``eval_every`` time steps (rounded up to whole rollouts) and at the end.
+        A checkpoint follows every rollout, so a killed run loses at most one. Stops early
+        (after a checkpoint, resumable, without an extra evaluation) once ``time.time()`` passes
+        ``deadline`` or after ``max_rollouts`` rollouts of this call; a run not yet begun does not
+        start after its deadline."""
         total = int(self.cfg["timesteps"] if timesteps is None else timesteps)
         self.target_timesteps = total
         chunk = max(1, -(-int(self.cfg["eval_every"]) // self.rollout)) * self.rollout
         if not self.curve:
+            if deadline is not None and time.time() >= deadline:
+                return self.summary()
             self._eval_point()
             self.save()
         bar = tqdm(total=total, initial=self.model.num_timesteps, desc=f"ppo seed {self.seed}",
                    disable=not self.progress, unit="step")
-        while self.model.num_timesteps < total and (deadline is None or time.time() < deadline):
-            todo = min(chunk, -(-(total - self.model.num_timesteps) // self.rollout) * self.rollout)
+        done = 0
+        while (self.model.num_timesteps < total and (deadline is None or time.time() < deadline)
+               and (max_rollouts is None or done < max_rollouts)):
             self.clock.start()
-            self.model.learn(todo, reset_num_timesteps=False, callback=_callback(bar))
+            self.model.learn(self.rollout, reset_num_timesteps=False, callback=_callback(bar))
             self.clock.stop("train")
-            self._eval_point()
+            done += 1
+            if self.model.num_timesteps % chunk == 0 or self.model.num_timesteps >= total:
+                self._eval_point()
+                bar.set_postfix(test=f"{self.curve[-1]['test_loss']:.4g}")
             self.save()
-            bar.set_postfix(test=f"{self.curve[-1]['test_loss']:.4g}")
         bar.close()
         return self.summary()
 
