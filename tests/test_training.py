@@ -128,6 +128,19 @@ def test_ppo_killed_between_evaluations_resumes_bitwise_and_a_late_run_does_not_
     assert late_apg.train(deadline=time.time() - 1)["curve"] == []
 
 
+def test_a_run_is_not_resumed_under_other_solver_settings(tmp_path, monkeypatch):
+    from diffcloth_gym.envs.flying_napkin_v0 import FlyingNapkinTask
+
+    APGTrainer(apg_cfg(epochs=1), tmp_path, progress=False, eval_starts=STARTS[:1]).train()
+    # Same run config, but the env now steps with another polish: its remaining epochs would be
+    # another experiment.
+    monkeypatch.setattr(FlyingNapkinTask, "solver_defaults", {"polish": "newton"})
+    with pytest.raises(ValueError, match="other solver settings.*polish"):
+        APGTrainer(apg_cfg(epochs=1), tmp_path, progress=False, eval_starts=STARTS[:1])
+    monkeypatch.undo()
+    assert APGTrainer(apg_cfg(epochs=1), tmp_path, progress=False, eval_starts=STARTS[:1]).epoch == 1
+
+
 def test_compare_writes_results_and_marks_a_stopped_run_partial(tmp_path):
     import json
 

@@ -27,7 +27,8 @@ from diffcloth_gym.training.accounting import Clock, count_steps, engine_of, pap
 from diffcloth_gym.training.config import load, merged
 from diffcloth_gym.training.evaluate import Evaluator, test_starts
 from diffcloth_gym.training.policy import MLPPolicy
-from diffcloth_gym.training.runlog import CsvLog, load_checkpoint, rng_states, save_atomic, set_rng_states
+from diffcloth_gym.training.runlog import (CsvLog, check_physics, load_checkpoint, physics_fingerprint, rng_states,
+                                          save_atomic, set_rng_states)
 
 
 def epoch_seed(run_seed: int, epoch: int, batch: int) -> int:
@@ -141,7 +142,7 @@ class EpochTrainer:
                 "optimizer": self.optimizer.state_dict(), "counts": self.counter.snapshot(),
                 "eval_steps": self.eval_steps, "clock": self.clock.state(), "curve": self.curve,
                 "last_eval": self.last_eval, "clip_count": self.clip_count, "rng": rng_states(),
-                **self.extra_state()}
+                "physics": physics_fingerprint(self.engine), **self.extra_state()}
 
     def _resume(self) -> None:
         ck = load_checkpoint(self.run_dir / "checkpoint.pt")
@@ -150,6 +151,7 @@ class EpochTrainer:
         if _fixed(ck["cfg"]) != _fixed(self.cfg) or ck["seed"] != self.seed:
             raise ValueError(f"{self.run_dir}: its checkpoint was made with another config or seed; "
                              "use another run folder or resume=False")
+        check_physics(ck, self.engine, self.run_dir)
         self.policy.load_state_dict(ck["policy"])
         self.optimizer.load_state_dict(ck["optimizer"])
         self.epoch, self.curve, self.clip_count = ck["epoch"], ck["curve"], ck["clip_count"]

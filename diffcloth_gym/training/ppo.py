@@ -32,7 +32,8 @@ from tqdm.auto import tqdm
 from diffcloth_gym.training.accounting import Clock, count_steps, paper_count, threads
 from diffcloth_gym.training.config import load, merged
 from diffcloth_gym.training.evaluate import Evaluator, test_starts
-from diffcloth_gym.training.runlog import CsvLog, load_checkpoint, rng_states, save_atomic, set_rng_states
+from diffcloth_gym.training.runlog import (CsvLog, check_physics, load_checkpoint, physics_fingerprint, rng_states,
+                                          save_atomic, set_rng_states)
 
 
 def _callback(bar):
@@ -97,6 +98,7 @@ class PPOTrainer:
             if _fixed(ck["cfg"]) != _fixed(self.cfg) or ck["seed"] != seed:
                 raise ValueError(f"{self.run_dir}: its checkpoint was made with another config or seed; "
                                  "use another run folder or resume=False")
+            check_physics(ck, self.engine, self.run_dir)
             self.model = PPO.load(io.BytesIO(ck["model"]), env=self.venv, device="cpu")
             self._restore(ck)
         self.eval_log = None
@@ -124,7 +126,7 @@ class PPOTrainer:
                 "num_timesteps": self.model.num_timesteps, "members": members,
                 "adapter_rngs": self.adapter._rngs, "counts": self.counter.snapshot(),
                 "eval_steps": self.eval_steps, "clock": self.clock.state(), "curve": self.curve,
-                "last_eval": self.last_eval, "rng": rng_states()}
+                "last_eval": self.last_eval, "rng": rng_states(), "physics": physics_fingerprint(self.engine)}
 
     def _restore(self, ck: dict) -> None:
         obs = self.engine.restore(ck["members"])

@@ -7,6 +7,8 @@ the CSV rows after the checkpoint are dropped (they belong to work that is redon
 from __future__ import annotations
 
 import csv
+import hashlib
+import json
 import os
 import random
 from pathlib import Path
@@ -81,3 +83,29 @@ def set_rng_states(states: Mapping[str, Any]) -> None:
     torch.set_rng_state(states["torch"])
     np.random.set_state(states["numpy"])
     random.setstate(states["random"])
+
+
+def physics_fingerprint(engine: Any) -> dict[str, Any]:
+    """What a run's simulated steps depend on besides its own config: the env's solver settings
+    and a hash of its physics (mesh, masses, parameters, effects, obstacles, contact response).
+    Paths are left out, so a checkout elsewhere resumes the same run."""
+    sim, scene = engine.template, engine.scene
+    h = hashlib.sha1()
+    for a in (sim.rest_positions, sim.masses, sim.triangles):
+        h.update(np.ascontiguousarray(a).tobytes())
+    h.update(json.dumps({"params": sim.params(), "effects": sim.effects, "handles": sim.attachment_nodes,
+                         **{k: scene.get(k) for k in ("obstacles", "contact", "self_collision")}},
+                        sort_keys=True, default=str).encode())
+    return {"solver": sim.solver(), "physics": h.hexdigest()}
+
+
+def check_physics(checkpoint: Mapping[str, Any], engine: Any, where: Path) -> None:
+    """Refuses to resume a run whose steps were simulated with other physics or solver settings
+    (the rest of it would be another experiment)."""
+    saved, now = checkpoint.get("physics"), physics_fingerprint(engine)
+    if saved is None or saved == now:
+        return
+    what = (f"solver settings {saved['solver']} -> {now['solver']}" if saved["solver"] != now["solver"]
+            else "the scene's physics (mesh, parameters or obstacles)")
+    raise ValueError(f"{where}: its checkpoint was simulated with other {what}; use another run folder "
+                     "or resume=False (--fresh) to start again")
