@@ -58,4 +58,13 @@ fn main() {
         g.steps.iter().filter(|s| s.fell_back).count(),
         g.v0.iter().map(|v| v.norm_squared()).sum::<f64>().sqrt(),
     );
+    let per = |d: std::time::Duration| 1e3 * d.as_secs_f64() / steps as f64;
+    println!(
+        "  backward stages ms/step: dP {:.2}, dR {:.2}, solve {:.2}, other {:.2}; factored steps {}",
+        per(g.profile.dp),
+        per(g.profile.dr),
+        per(g.profile.solve),
+        per(g.profile.other),
+        g.steps.iter().filter(|s| s.factored).count()
+    );
 }

@@ -18,6 +18,7 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
+use std::sync::Arc;
 
 /// Where one 3x3 block lives in the (both-triangle, column-major) value array: entry `(r, s)`
 /// at `base + s * stride + r` (each of a node's three columns holds `stride` rows).
@@ -27,12 +28,12 @@ struct Slot {
     stride: u32,
 }
 
-/// The assembled Hessian and its Cholesky factor; every buffer allocated at construction.
-pub(crate) struct StepHessian {
+/// What a model's step Hessians share (built once per model, `Model::hessian_pattern`): the
+/// pattern, the slot of every contribution and the symbolic Cholesky analysis.
+pub(crate) struct HessianPattern {
     /// The 3m x 3m pattern, both triangles (faer reads the lower one).
     col_ptr: Vec<usize>,
     row_idx: Vec<usize>,
-    values: Vec<f64>,
     /// Per entry of P (its CSC order), the block it adds to; per `-dP` block the constraint
     /// sets emit (their fixed order), its slot.
     p_slots: Vec<Slot>,
@@ -41,6 +42,12 @@ pub(crate) struct StepHessian {
     p_col_ptr: Vec<usize>,
     p_row_idx: Vec<usize>,
     symbolic: SymbolicCholesky<usize>,
+}
+
+/// One Hessian's values and Cholesky factor; every buffer allocated at construction.
+pub(crate) struct StepHessian {
+    pattern: Arc<HessianPattern>,
+    values: Vec<f64>,
     l_values: Vec<f64>,
     /// Whether `l_values` holds the factor of the current values.
     factored: bool,
@@ -49,17 +56,21 @@ pub(crate) struct StepHessian {
     column: Vec<f64>,
 }
 
-impl StepHessian {
-    /// The pattern and symbolic analysis for `model`; `lin` is any linearization of its
-    /// constraint sets (only the blocks' positions are read).
-    pub(crate) fn new(model: &Model, lin: &[Vec<f64>]) -> Result<Self> {
+impl HessianPattern {
+    /// The pattern and symbolic analysis for `model`.
+    pub(crate) fn new(model: &Model) -> Result<Self> {
+        // Only the blocks' positions are read, never their values.
+        let lin: Vec<Vec<f64>> = model
+            .constraint_sets()
+            .map(|c| vec![0.0; c.linearization_len()])
+            .collect();
         let m = model.num_nodes();
         let p = model.factor.matrix().as_ref();
         // Node pattern: P's, plus every pair the constraint sets emit (the same pairs, as
         // dP = A^T (w dp) A shares A with P; taken as a union to rely on neither).
         let mut nodes: Vec<Vec<usize>> = (0..m).map(|j| p.row_idx_of_col(j).collect()).collect();
         let mut pairs = Vec::new();
-        for (c, l) in model.constraint_sets().zip(lin) {
+        for (c, l) in model.constraint_sets().zip(&lin) {
             c.for_each_neg_dp_block(l, &mut |a, b, _| pairs.push((a, b)));
         }
         for &(a, b) in &pairs {
@@ -99,26 +110,19 @@ impl StepHessian {
             pattern,
             Side::Lower,
             SymmetricOrdering::Amd,
+            // faer's choice (supernodal here): forced simplicial was measured 3.5x slower
+            // on the Hat (3m = 1854, 265k factor entries).
             CholeskySymbolicParams::default(),
         )
         .map_err(|e| Error::Solver(format!("symbolic Cholesky of the step Hessian: {e:?}")))?;
-        let stack = MemBuffer::new(StackReq::any_of(&[
-            symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
-            symbolic.solve_in_place_scratch::<f64>(1, Par::Seq),
-        ]));
         Ok(Self {
-            l_values: vec![0.0; symbolic.len_val()],
             symbolic,
-            values: vec![0.0; row_idx.len()],
             p_slots,
             dp_slots,
             p_col_ptr: p.col_ptr().to_vec(),
             p_row_idx: p.row_idx().to_vec(),
             col_ptr,
             row_idx,
-            factored: false,
-            stack,
-            column: vec![0.0; n],
         })
     }
 
@@ -127,19 +131,43 @@ impl StepHessian {
         let p = model.factor.matrix().symbolic();
         p.col_ptr() == self.p_col_ptr.as_slice() && p.row_idx() == self.p_row_idx.as_slice()
     }
+}
+
+impl StepHessian {
+    pub(crate) fn new(pattern: Arc<HessianPattern>) -> Self {
+        let symbolic = &pattern.symbolic;
+        let stack = MemBuffer::new(StackReq::any_of(&[
+            symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
+            symbolic.solve_in_place_scratch::<f64>(1, Par::Seq),
+        ]));
+        Self {
+            l_values: vec![0.0; symbolic.len_val()],
+            values: vec![0.0; pattern.row_idx.len()],
+            column: vec![0.0; pattern.col_ptr.len() - 1],
+            factored: false,
+            stack,
+            pattern,
+        }
+    }
+
+    /// Whether this was built for P's pattern of `model`.
+    pub(crate) fn fits(&self, model: &Model) -> bool {
+        self.pattern.fits(model)
+    }
 
     /// Assembles `H = P (x) I_3 - dP` from a linearization and factors it; false (and no
     /// usable factor) if it is not numerically positive definite.
     pub(crate) fn factor(&mut self, model: &Model, lin: &[Vec<f64>]) -> bool {
+        let pattern = &*self.pattern;
         let values = &mut self.values;
         values.iter_mut().for_each(|v| *v = 0.0);
-        for (s, &v) in self.p_slots.iter().zip(model.factor.matrix().val()) {
+        for (s, &v) in pattern.p_slots.iter().zip(model.factor.matrix().val()) {
             let (base, stride) = (s.base as usize, s.stride as usize);
             for c in 0..3 {
                 values[base + c * stride + c] += v;
             }
         }
-        let mut slots = self.dp_slots.iter();
+        let mut slots = pattern.dp_slots.iter();
         for (c, l) in model.constraint_sets().zip(lin) {
             c.for_each_neg_dp_block(l, &mut |_, _, block| {
                 let s = slots.next().expect("one slot per block");
@@ -153,13 +181,13 @@ impl StepHessian {
             });
         }
         let n = self.column.len();
-        let pattern =
-            SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
-        self.factored = self
+        let csc =
+            SymbolicSparseColMatRef::new_checked(n, n, &pattern.col_ptr, None, &pattern.row_idx);
+        self.factored = pattern
             .symbolic
             .factorize_numeric_llt::<f64>(
                 &mut self.l_values,
-                SparseColMatRef::new(pattern, &self.values),
+                SparseColMatRef::new(csc, &self.values),
                 Side::Lower,
                 Default::default(),
                 Par::Seq,
@@ -182,7 +210,7 @@ impl StepHessian {
             c.copy_from_slice(v.as_slice());
         }
         let n = self.column.len();
-        LltRef::new(&self.symbolic, &self.l_values).solve_in_place_with_conj(
+        LltRef::new(&self.pattern.symbolic, &self.l_values).solve_in_place_with_conj(
             Conj::No,
             MatMut::from_column_major_slice_mut(&mut self.column, n, 1),
             Par::Seq,

@@ -31,7 +31,7 @@ const MAX_FAILURES: usize = 3;
 /// The factored preconditioner's state during one backward pass.
 #[derive(Default)]
 pub(super) struct Factored {
-    /// Built on first use (its pattern and symbolic analysis: once per pass).
+    /// Built on first use (its pattern and symbolic analysis: once per model).
     hessian: Option<StepHessian>,
     /// The analysis failed, or `MAX_FAILURES` factorizations in a row found `H` indefinite:
     /// never again this pass.
@@ -44,6 +44,20 @@ pub(super) struct Factored {
 }
 
 impl Factored {
+    /// Continues a pass (a checkpointed segment, or one-step adjoints in sequence) that had
+    /// already switched to the factor or not.
+    pub(super) fn new(enabled: bool) -> Self {
+        Self {
+            enabled,
+            ..Default::default()
+        }
+    }
+
+    /// Whether the pass has switched to the factor (carried to the next segment).
+    pub(super) fn enabled(&self) -> bool {
+        self.enabled
+    }
+
     /// Whether this step should try the factor.
     pub(super) fn wanted(&self) -> bool {
         self.enabled && !self.unavailable
@@ -61,9 +75,9 @@ impl Factored {
             return false;
         }
         if !self.hessian.as_ref().is_some_and(|h| h.fits(model)) {
-            match StepHessian::new(model, lin) {
-                Ok(h) => self.hessian = Some(h),
-                Err(_) => {
+            match model.hessian_pattern().filter(|p| p.fits(model)) {
+                Some(p) => self.hessian = Some(StepHessian::new(p)),
+                None => {
                     self.unavailable = true;
                     return false;
                 }
