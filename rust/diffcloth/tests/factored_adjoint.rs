@@ -24,11 +24,8 @@ fn flat(g: &diffcloth::Gradients) -> Vec<f64> {
         .collect()
 }
 
-/// The Hat on its head, polished and driven like the env: P-preconditioned CG needs over a
-/// hundred iterations per step there, so the pass factors each step's H; the gradient is the
-/// sparse-LU one, and the same bits on a rerun.
-#[test]
-fn factored_adjoint_on_the_hat_matches_the_direct_solve() {
+/// The Hat on its head, polished to 1e-10 and driven like the env for `steps` steps.
+fn driven_hat(steps: usize) -> Simulator {
     diffcloth::init_linear_algebra();
     let mut cfg = load_config("hat");
     cfg.solver.parallel = false;
@@ -37,7 +34,6 @@ fn factored_adjoint_on_the_hat_matches_the_direct_solve() {
     cfg.solver.max_iterations = 2000;
     let mut sim = Simulator::new(&cfg).unwrap();
     sim.set_recording(true);
-    let steps = 12;
     let mut targets = sim.attachment_targets().to_vec();
     for k in 0..steps {
         let moves = random_vectors(targets.len(), 0.1, 31 + k as u64);
@@ -48,6 +44,16 @@ fn factored_adjoint_on_the_hat_matches_the_direct_solve() {
         })
         .unwrap();
     }
+    sim
+}
+
+/// The Hat on its head, polished and driven like the env: P-preconditioned CG needs over a
+/// hundred iterations per step there, so the pass factors each step's H; the gradient is the
+/// sparse-LU one, and the same bits on a rerun.
+#[test]
+fn factored_adjoint_on_the_hat_matches_the_direct_solve() {
+    let steps = 12;
+    let sim = driven_hat(steps);
     let krylov = gradients(&sim, steps, AdjointSolver::Krylov);
     let factored = krylov.steps.iter().filter(|s| s.factored).count();
     assert!(
@@ -85,7 +91,37 @@ fn factored_adjoint_on_the_hat_matches_the_direct_solve() {
     );
 }
 
-/// Wind 24x24: P-preconditioned CG converges in a few iterations, so no step pays for a
+/// One-step adjoints chained in reverse (`backward_step`, what `step_grad` runs) carry the
+/// switch along the chain, and the chain's dL/dv0 is the full backward's.
+#[test]
+fn chained_one_step_adjoints_use_the_factor_too() {
+    let steps = 8;
+    let sim = driven_hat(steps);
+    let full = gradients(&sim, steps, AdjointSolver::Krylov);
+    let n = sim.num_nodes();
+    let options = BackwardOptions::default();
+    let loss = |k: usize| random_vectors(n, 1.0 / n as f64, 100 + k as u64);
+    let (mut warm, mut dl_x, mut dl_v) = (None, loss(steps - 1), vec![Vec3::zeros(); n]);
+    let mut factored = 0;
+    for k in (0..steps).rev() {
+        let g = sim
+            .backward_step(k, &dl_x, &dl_v, &options, &mut warm)
+            .unwrap();
+        factored += usize::from(g.steps[k].factored);
+        (dl_x, dl_v) = (g.x0, g.v0);
+        if k > 0 {
+            dl_x.iter_mut().zip(&loss(k - 1)).for_each(|(a, b)| *a += b);
+        }
+    }
+    assert!(factored > 0, "the chain never used the factored Hessian");
+    let norm = |v: &[Vec3]| v.iter().map(|x| x.norm_squared()).sum::<f64>().sqrt();
+    let diff: Vec<Vec3> = dl_v.iter().zip(&full.v0).map(|(a, b)| a - b).collect();
+    let err = norm(&diff) / norm(&full.v0);
+    assert!(err < 1e-7, "chained dL/dv0 vs the full backward: {err:.2e}");
+}
+
+/// Wind (the scene file's 12x12 cloth): P-preconditioned CG converges in about 26 iterations, so no
+/// step pays for a
 /// factorization.
 #[test]
 fn factored_adjoint_is_not_used_where_p_preconditions_well() {
