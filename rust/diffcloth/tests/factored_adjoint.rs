@@ -120,9 +120,8 @@ fn chained_one_step_adjoints_use_the_factor_too() {
     assert!(err < 1e-7, "chained dL/dv0 vs the full backward: {err:.2e}");
 }
 
-/// Wind (the scene file's 12x12 cloth): P-preconditioned CG converges in about 26 iterations, so no
-/// step pays for a
-/// factorization.
+/// Wind (the scene file's 12x12 cloth): P-preconditioned CG converges in about 26
+/// iterations, so no step pays for a factorization.
 #[test]
 fn factored_adjoint_is_not_used_where_p_preconditions_well() {
     diffcloth::init_linear_algebra();
