@@ -1,7 +1,9 @@
 //! Gradient error of a Hat rollout driven like `DiffCloth/Hat-v0` with random actions (loss on
 //! every step) against a PD rollout converged to 1e-13, per forward tolerance and polish:
-//! `cargo run --release --example polish_gradient [STEPS] [REFERENCE_POLISH]` (the reference
-//! is solved to 1e-13 with that polish, default none).
+//! `cargo run --release --example polish_gradient [STEPS] [REFERENCE_POLISH] [POLISH:TOL ...]`
+//! (the reference is solved to 1e-13 with that polish, default none; the cases default to
+//! both polishes at 1e-8 .. 1e-11). Also prints the backward's cost; `PER_STEP=1` lists each
+//! step's adjoint iterations.
 use diffcloth::{BackwardOptions, Polish, Simulator, SolverSettings, StepInput, Vec3};
 
 type Rollout = (Vec<Vec3>, Vec<Vec<Vec3>>, u64, u64, f64, (f64, f64, usize));

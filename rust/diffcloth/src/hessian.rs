@@ -1,12 +1,13 @@
 //! The step objective's Hessian `H = P (x) I_3 - dP` (3m x 3m, node-major), assembled and
 //! factored by sparse Cholesky. Its pattern is fixed by the mesh (P's node pattern, every node
 //! pair a dense 3x3 block), so the fill-reducing ordering, the symbolic factorization and the
-//! map from each energy's blocks to their slots are built once; new values (a new
-//! linearization) cost an assembly and a numeric factorization. A failed factorization is how
-//! an indefinite `H` shows (a step away from a minimum; the caller falls back).
+//! map from each energy's blocks to their slots are built once per model
+//! ([`HessianPattern`], kept in the `Model`); new values (a new linearization) cost an
+//! assembly and a numeric factorization ([`StepHessian`]). A failed factorization is how an
+//! indefinite `H` shows (a step away from a minimum; the caller falls back).
 //!
-//! The adjoint's PCG uses the factor of one step's contact-free `H` to precondition the
-//! neighbouring steps' solves (`backward/solvers.rs`).
+//! The adjoint preconditions each step's solve with the factor of that step's own
+//! contact-free `H` where P does badly (`backward/factored.rs`).
 
 use crate::error::{Error, Result};
 use crate::forward::Model;
