@@ -229,7 +229,9 @@ class Simulator:
         (one entry per recorded step); an (n, 3) array (the final step only: a terminal loss);
         or a dict ``{step: (n, 3) array}`` (negative steps count from the end, so ``{-1: g}``
         is the final step). ``solver``: ``"krylov"`` (CG, or BiCGStab with active contacts,
-        preconditioned by the PD factorization; default), ``"direct"`` (sparse LU) or
+        preconditioned by the PD factorization, or, once that takes over 50 iterations in a
+        pass, by each step's own sparse-Cholesky-factored Hessian; default), ``"direct"``
+        (sparse LU) or
         ``"fixed_point"`` (the paper's Eqn. 30); iterative solves that stall fall back to
         ``"direct"`` and are counted in ``fell_back``.
 
@@ -239,7 +241,8 @@ class Simulator:
         rollout (None without the effect); every parameter of :attr:`PARAM_NAMES` by the name
         :meth:`params` and :meth:`set_params` use (scalars; 3-lists ``gravity``,
         ``wind_direction``; ``mu_obstacles`` one per obstacle); per-step solver stats arrays
-        ``iterations``, ``fell_back``, ``residual``; a stage ``profile``; and ``warnings``: the
+        ``iterations``, ``fell_back``, ``factored`` (preconditioned by the step's factored
+        Hessian), ``residual``; a stage ``profile``; and ``warnings``: the
         reasons the gradient may be untrustworthy (e.g. recorded steps that stopped above the
         residual the adjoint needs: record with ``set_solver(preset="gradient")``). Gradients
         are never clipped or rescaled.

@@ -171,6 +171,14 @@ pub(crate) fn gradients_dict<'py>(py: Python<'py>, g: &Gradients) -> PyResult<Bo
             .to_pyarray(py),
     )?;
     d.set_item(
+        "factored",
+        g.steps
+            .iter()
+            .map(|s| s.factored)
+            .collect::<Vec<_>>()
+            .to_pyarray(py),
+    )?;
+    d.set_item(
         "residual",
         per_step(g.steps.iter().map(|s| s.residual).collect()),
     )?;

@@ -1,10 +1,14 @@
 //! Gradient error of a Hat rollout driven like `DiffCloth/Hat-v0` with random actions (loss on
 //! every step) against a PD rollout converged to 1e-13, per forward tolerance and polish:
-//! `cargo run --release --example polish_gradient [STEPS] [REFERENCE_POLISH]` (the reference
-//! is solved to 1e-13 with that polish, default none).
+//! `cargo run --release --example polish_gradient [STEPS] [REFERENCE_POLISH] [POLISH:TOL ...]`
+//! (the reference is solved to 1e-13 with that polish, default none; the cases default to
+//! both polishes at 1e-8 .. 1e-11). Also prints the backward's cost; `PER_STEP=1` lists each
+//! step's adjoint iterations.
 use diffcloth::{BackwardOptions, Polish, Simulator, SolverSettings, StepInput, Vec3};
 
-fn rollout(tol: f64, polish: Polish, steps: usize) -> (Vec<Vec3>, Vec<Vec<Vec3>>, u64, u64, f64) {
+type Rollout = (Vec<Vec3>, Vec<Vec<Vec3>>, u64, u64, f64, (f64, f64, usize));
+
+fn rollout(tol: f64, polish: Polish, steps: usize) -> Rollout {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../diffcloth_gym/configs/hat.toml");
     let mut sim = Simulator::from_toml_file(&path).unwrap();
@@ -49,9 +53,18 @@ fn rollout(tol: f64, polish: Polish, steps: usize) -> (Vec<Vec3>, Vec<Vec<Vec3>>
                 .collect()
         })
         .collect();
+    let t1 = std::time::Instant::now();
     let g = sim
         .backward(&dl_dx, &[], &BackwardOptions::default())
         .unwrap();
+    let backward = 1e3 * t1.elapsed().as_secs_f64() / steps as f64;
+    let adjoint_iterations =
+        g.steps.iter().map(|s| s.iterations).sum::<usize>() as f64 / steps as f64;
+    let fell_back = g.steps.iter().filter(|s| s.fell_back).count();
+    if std::env::var("PER_STEP").is_ok() {
+        let its: Vec<usize> = g.steps.iter().map(|s| s.iterations).collect();
+        eprintln!("adjoint iterations per step: {its:?}");
+    }
     let p = sim.profile();
     (
         g.v0,
@@ -59,6 +72,7 @@ fn rollout(tol: f64, polish: Polish, steps: usize) -> (Vec<Vec3>, Vec<Vec<Vec3>>
         p.iterations,
         p.newton_cg_iterations,
         1e3 * forward / steps as f64,
+        (backward, adjoint_iterations, fell_back),
     )
 }
 
@@ -77,9 +91,28 @@ fn main() {
     };
     let reference = flat(&rv, &rt);
     let norm = reference.iter().map(|x| x * x).sum::<f64>().sqrt();
-    for polish in [Polish::None, Polish::Newton] {
-        for tol in [1e-8, 1e-9, 1e-10, 1e-11] {
-            let (v, t, it, cg, ms) = rollout(tol, polish, steps);
+    // Optional cases after the two arguments, e.g. `newton:1e-10` (default: every polish at
+    // 1e-8 .. 1e-11).
+    let mut cases: Vec<(Polish, f64)> = std::env::args()
+        .skip(3)
+        .map(|c| {
+            let (p, t) = c.split_once(':').expect("case POLISH:TOL");
+            (
+                Polish::from_name(p).expect("polish"),
+                t.parse().expect("tolerance"),
+            )
+        })
+        .collect();
+    if cases.is_empty() {
+        for polish in [Polish::None, Polish::Newton] {
+            for tol in [1e-8, 1e-9, 1e-10, 1e-11] {
+                cases.push((polish, tol));
+            }
+        }
+    }
+    {
+        for (polish, tol) in cases {
+            let (v, t, it, cg, ms, (back, adj, fell)) = rollout(tol, polish, steps);
             let g = flat(&v, &t);
             let err = g
                 .iter()
@@ -89,7 +122,7 @@ fn main() {
                 .sqrt()
                 / norm;
             println!(
-                "{:6} tol {tol:.0e}: gradient rel. error {err:.2e}, PD it/step {:.1}, CG it/step {:.1}, forward {ms:.1} ms/step",
+                "{:6} tol {tol:.0e}: gradient rel. error {err:.2e}, PD it/step {:.1}, CG it/step {:.1}, forward {ms:.1} ms/step, backward {back:.2} ms/step ({adj:.1} adjoint it/step, {fell} fell back)",
                 polish.name(), it as f64 / steps as f64, cg as f64 / steps as f64
             );
         }

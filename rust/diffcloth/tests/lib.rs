@@ -6,6 +6,7 @@ mod common;
 mod contact;
 mod contact_gradients;
 mod contact_response;
+mod factored_adjoint;
 mod folded_cloth;
 mod forward_physics;
 mod gradient_check;

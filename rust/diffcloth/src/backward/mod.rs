@@ -8,6 +8,7 @@
 //! parameter theta gets `-z . dg/dtheta`.
 
 mod contact;
+mod factored;
 mod gradients;
 mod operator;
 mod replay;
@@ -58,6 +59,9 @@ pub struct AdjointStepStats {
     pub iterations: usize,
     /// The iterative solver stalled or diverged and the direct solve was used.
     pub fell_back: bool,
+    /// The Krylov solve was preconditioned by this step's own factored `H` rather than by P
+    /// (`factored.rs`: once P-preconditioned solves take many iterations).
+    pub factored: bool,
     /// Final relative residual.
     pub residual: f64,
 }

@@ -2,6 +2,7 @@
 //! checkpointed segments), carrying dL/dx and dL/dv back through each step's adjoint solve.
 
 use super::contact::{linearize_contacts, ContactCoupling};
+use super::factored::Factored;
 use super::operator::{AdjointOperator, Linearization};
 use super::solvers::SolveWork;
 use super::{AdjointSolver, BackwardOptions, Gradients, TRUSTED_FORWARD_RESIDUAL};
@@ -21,7 +22,12 @@ pub(super) struct Resume {
     /// The last two adjoints, the warm start of the next solve.
     pub(super) z: Vec<Vec3>,
     pub(super) z_previous: Option<Vec<Vec3>>,
+    /// Whether the adjoint solves had switched to the factored Hessian (`factored.rs`).
+    pub(super) factored: bool,
 }
+
+/// What a segment hands to the next: `Resume` without the gradients.
+pub(super) type Carry = (Vec<Vec3>, Vec<Vec3>, Vec<Vec3>, Option<Vec<Vec3>>, bool);
 
 impl Simulator {
     /// Backpropagates a loss through the recorded steps. `dl_dx[n]` and `dl_dv[n]` are the
@@ -122,13 +128,14 @@ impl Simulator {
                 state.take(),
                 &mut carry,
             )?;
-            let (carry_x, carry_v, z, z_previous) = carry.expect("set on success");
+            let (carry_x, carry_v, z, z_previous, factored) = carry.expect("set on success");
             state = Some(Resume {
                 grads: g,
                 carry_x,
                 carry_v,
                 z,
                 z_previous,
+                factored,
             });
         }
         Ok(state.map(|r| r.grads).unwrap_or_default())
@@ -167,7 +174,7 @@ impl Simulator {
         options: &BackwardOptions,
         cancel: &Cancel<'_>,
         resume: Option<Resume>,
-        carry_out: &mut Option<(Vec<Vec3>, Vec<Vec3>, Vec<Vec3>, Option<Vec<Vec3>>)>,
+        carry_out: &mut Option<Carry>,
     ) -> Result<Gradients> {
         let steps = tape.len();
         let n = self.num_nodes();
@@ -179,12 +186,14 @@ impl Simulator {
             mut carry_v,
             mut z,
             z_previous,
+            factored,
         } = resume.unwrap_or_else(|| Resume {
             grads: Gradients::zeros(steps, self.obstacles().len()),
             carry_x: vec![Vec3::zeros(); n],
             carry_v: vec![Vec3::zeros(); n],
             z: vec![Vec3::zeros(); n],
             z_previous: None,
+            factored: false,
         });
         let mut rhs = vec![Vec3::zeros(); n];
         let mut have_previous = z_previous.is_some();
@@ -197,6 +206,7 @@ impl Simulator {
             contact_scratch: Mutex::default(),
         };
         let mut work = SolveWork::new(self.factor(), &op, cancel);
+        work.factored = Factored::new(factored);
         for &(first, records) in segments.iter().rev() {
             for (offset, rec) in records.iter().enumerate().rev() {
                 let k = first + offset;
@@ -245,7 +255,13 @@ impl Simulator {
         }
         grads.x0 = carry_x.clone();
         grads.v0 = carry_v.clone();
-        *carry_out = Some((carry_x, carry_v, z, have_previous.then_some(z_previous)));
+        *carry_out = Some((
+            carry_x,
+            carry_v,
+            z,
+            have_previous.then_some(z_previous),
+            work.factored.enabled(),
+        ));
         grads.warnings.clear();
         if !grads.loose_steps.is_empty() {
             let worst = grads

@@ -2,6 +2,7 @@
 //! preconditioned by the PD factorization, sparse LU, and the policy that falls back to LU
 //! when an iterative solve stalls, diverges or hits its cap.
 
+use super::factored::Factored;
 use super::operator::{col_to_nodes, nodes_to_col, AdjointOperator, PdPreconditioner};
 use super::{AdjointSolver, AdjointStepStats, BackwardOptions};
 use crate::cancel::Cancel;
@@ -13,6 +14,7 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::matrix_free::bicgstab::{bicgstab, bicgstab_scratch, BicgParams};
 use faer::matrix_free::{IdentityPrecond, InitialGuessStatus};
 use faer::prelude::*;
+use faer::reborrow::ReborrowMut;
 use faer::sparse::{SparseColMat, Triplet};
 use faer::Par;
 use nalgebra::Matrix3;
@@ -52,6 +54,8 @@ pub(super) struct SolveWork<'a> {
     pub(super) p: Vec<Vec3>,
     pub(super) ap: Vec<Vec3>,
     pub(super) y: Vec<Vec3>,
+    /// The factor of the step's own `H`, where P preconditions badly.
+    pub(super) factored: Factored,
 }
 
 impl<'a> SolveWork<'a> {
@@ -79,6 +83,7 @@ impl<'a> SolveWork<'a> {
             p: zeros.clone(),
             ap: zeros.clone(),
             y: zeros,
+            factored: Factored::default(),
         }
     }
 }
@@ -113,6 +118,7 @@ impl Simulator {
             let r2: f64 = hz.iter().zip(g).map(|(a, b)| (b - a).norm_squared()).sum();
             r2.sqrt() / g_norm
         };
+        work.factored.used = false;
         let iterative = match options.solver {
             AdjointSolver::Direct => None,
             AdjointSolver::FixedPoint => Some(self.fixed_point(op, g, z, options, work)),
@@ -134,6 +140,7 @@ impl Simulator {
                 return Ok(AdjointStepStats {
                     iterations,
                     fell_back: false,
+                    factored: work.factored.used,
                     residual,
                 });
             }
@@ -142,6 +149,7 @@ impl Simulator {
         Ok(AdjointStepStats {
             iterations: iterative.map_or(0, |a| a.iterations),
             fell_back: iterative.is_some(),
+            factored: work.factored.used,
             residual: residual_of(z, &mut work.ap),
         })
     }
@@ -207,8 +215,9 @@ impl Simulator {
         Attempt::failed(options.max_iterations)
     }
 
-    /// Krylov solve preconditioned by `P`: CG while `H` is symmetric (no active contact),
-    /// else (or when CG meets negative curvature) faer's BiCGStab.
+    /// Krylov solve preconditioned by `P` (or, once P has done badly in this pass, by the
+    /// step's factored contact-free `H`: `factored.rs`): CG while `H` is symmetric (no active
+    /// contact), else (or when CG meets negative curvature) faer's BiCGStab.
     pub(super) fn krylov(
         &self,
         op: &AdjointOperator<'_>,
@@ -223,9 +232,18 @@ impl Simulator {
             z.iter_mut().for_each(|v| *v = Vec3::zeros());
         }
         let mut spent = 0;
+        // The step's own contact-free H, factored, where P preconditions badly.
+        let factored =
+            work.factored.wanted() && work.factored.factor(&**self.model(), &op.lin.per_set);
+        work.factored.used = factored;
         if op.contacts.is_empty() {
-            match self.pcg(op, g, z, options, work) {
-                Ok(attempt) => return attempt,
+            match self.pcg(op, g, z, options, work, factored) {
+                Ok(attempt) => {
+                    if !factored {
+                        work.factored.observe(attempt.iterations);
+                    }
+                    return attempt;
+                }
                 Err(iterations) => spent = iterations,
             }
         }
@@ -237,27 +255,56 @@ impl Simulator {
         params.initial_guess = InitialGuessStatus::MaybeNonZero;
         params.rel_tolerance = options.tolerance;
         params.max_iters = options.max_iterations;
-        // Right preconditioning by P: H P^{-1} is close to the identity (dP is small next to P).
-        let result = bicgstab(
-            out.as_mut(),
-            IdentityPrecond { dim: 3 * n },
-            &work.precond,
-            op,
-            rhs.as_ref(),
-            params,
-            |_| {},
-            Par::Seq,
-            MemStack::new(&mut work.stack),
-        );
+        // Right preconditioning by P (H P^{-1} is close to the identity: dP is small next to
+        // P), or by the contact-free H (the contact term is of low rank).
+        let SolveWork {
+            precond,
+            stack,
+            factored: by_factor,
+            ..
+        } = work;
+        let mut out_col = out.as_mut();
+        let mut stack = MemStack::new(stack);
+        let result = if factored {
+            bicgstab(
+                out_col.rb_mut(),
+                IdentityPrecond { dim: 3 * n },
+                by_factor.as_precond(),
+                op,
+                rhs.as_ref(),
+                params,
+                |_| {},
+                Par::Seq,
+                &mut stack,
+            )
+        } else {
+            bicgstab(
+                out_col.rb_mut(),
+                IdentityPrecond { dim: 3 * n },
+                &*precond,
+                op,
+                rhs.as_ref(),
+                params,
+                |_| {},
+                Par::Seq,
+                &mut stack,
+            )
+        };
         col_to_nodes(&out, z);
         match result {
-            Ok(info) => Attempt::converged(spent + info.iter_count),
+            Ok(info) => {
+                if !factored {
+                    work.factored.observe(info.iter_count);
+                }
+                Attempt::converged(spent + info.iter_count)
+            }
             Err(_) => Attempt::failed(spent + params.max_iters),
         }
     }
 
     /// Preconditioned conjugate gradients on `H z = g` (contact-free `H = P - dP` is
-    /// symmetric), stopping at `|g - H z| <= tolerance |g|`. Hand-written rather than faer's
+    /// symmetric), stopping at `|g - H z| <= tolerance |g|`; preconditioned by the step's
+    /// factored H (`by_factor`, `factored.rs`) or by P. Hand-written rather than faer's
     /// CG, which is a block method: for one right-hand side its per-iteration k x k Cholesky,
     /// permutations and gemm calls cost about 5 % of an iteration, and here the vectors stay
     /// node-major. `Err(iterations)` when `H` shows non-positive curvature (possible away from
@@ -269,6 +316,7 @@ impl Simulator {
         z: &mut [Vec3],
         options: &BackwardOptions,
         work: &mut SolveWork<'_>,
+        by_factor: bool,
     ) -> std::result::Result<Attempt, usize> {
         let SolveWork {
             r,
@@ -277,8 +325,17 @@ impl Simulator {
             ap,
             y,
             cancel,
+            factored,
             ..
         } = work;
+        let factor = self.factor();
+        let mut precondition = |r: &[Vec3], s: &mut [Vec3]| {
+            if by_factor {
+                factored.solve(r, s)
+            } else {
+                factor.solve_nodes_into(r, s, y)
+            }
+        };
         let threshold = options.tolerance * norm(g);
         op.apply_nodes(z, ap);
         for ((ri, gi), ai) in r.iter_mut().zip(g).zip(ap.iter()) {
@@ -287,7 +344,7 @@ impl Simulator {
         if norm(r) <= threshold {
             return Ok(Attempt::converged(0));
         }
-        self.factor().solve_nodes_into(r, s, y);
+        precondition(r, s);
         p.copy_from_slice(s);
         let mut rs = dot(r, s);
         for it in 1..=options.max_iterations {
@@ -310,7 +367,7 @@ impl Simulator {
             if norm(r) <= threshold {
                 return Ok(Attempt::converged(it));
             }
-            self.factor().solve_nodes_into(r, s, y);
+            precondition(r, s);
             let rs_next = dot(r, s);
             let beta = rs_next / rs;
             rs = rs_next;

@@ -21,6 +21,8 @@ pub struct AdjointWarmStart {
     step: usize,
     z: Vec<Vec3>,
     z_previous: Option<Vec<Vec3>>,
+    /// Whether the chain's adjoint solves have switched to the factored Hessian.
+    factored: bool,
 }
 
 impl Simulator {
@@ -67,9 +69,9 @@ impl Simulator {
         }
         super::replay::validate_options(options)?;
         let steps = records.len();
-        let (z, z_previous) = match warm.take() {
-            Some(w) if w.step == k + 1 && w.z.len() == n => (w.z, w.z_previous),
-            _ => (vec![Vec3::zeros(); n], None),
+        let (z, z_previous, factored) = match warm.take() {
+            Some(w) if w.step == k + 1 && w.z.len() == n => (w.z, w.z_previous, w.factored),
+            _ => (vec![Vec3::zeros(); n], None, false),
         };
         // The loss gradients enter as the carry from "later steps", so the step's own slot in
         // dl_dx/dl_dv stays empty and nothing is sized by the horizon but empty rows.
@@ -79,6 +81,7 @@ impl Simulator {
             carry_v: dl_dv.to_vec(),
             z,
             z_previous,
+            factored,
         };
         let replay = Simulator::from_model(rec.model.clone(), rec.solver.clone());
         let mut carry = None;
@@ -93,11 +96,12 @@ impl Simulator {
             Some(resume),
             &mut carry,
         )?;
-        if let Some((_, _, z, z_previous)) = carry {
+        if let Some((_, _, z, z_previous, factored)) = carry {
             *warm = Some(AdjointWarmStart {
                 step: k,
                 z,
                 z_previous,
+                factored,
             });
         }
         Ok(grads)

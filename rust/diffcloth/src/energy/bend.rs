@@ -252,6 +252,28 @@ impl PdConstraints for Bend {
         }
     }
 
+    fn for_each_neg_dp_block(
+        &self,
+        lin: &[f64],
+        emit: &mut dyn FnMut(usize, usize, &Matrix3<f64>),
+    ) {
+        for (i, j) in lin.chunks_exact(9).enumerate() {
+            let (nbrs, coefs) = self.stencil(i);
+            let center_coef: f64 = -coefs.iter().sum::<f64>();
+            let node = |k: usize| match k {
+                0 => (self.center[i], center_coef),
+                _ => (nbrs[k - 1], coefs[k - 1]),
+            };
+            let jw = Matrix3::from_column_slice(j);
+            for a in 0..=nbrs.len() {
+                for b in 0..=nbrs.len() {
+                    let ((na, ca), (nb, cb)) = (node(a), node(b));
+                    emit(na, nb, &(-ca * cb * jw));
+                }
+            }
+        }
+    }
+
     /// `grad W` on neighbour j is `k a_i c_ij (A_i x - p_i)` (minus their sum on the center).
     fn stiffness_dot(&self, x: &[Vec3], z: &[Vec3]) -> f64 {
         let mut dot = 0.0;

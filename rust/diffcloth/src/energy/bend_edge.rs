@@ -236,6 +236,21 @@ impl PdConstraints for BendEdge {
         }
     }
 
+    fn for_each_neg_dp_block(
+        &self,
+        lin: &[f64],
+        emit: &mut dyn FnMut(usize, usize, &Matrix3<f64>),
+    ) {
+        for ((j, n), c) in lin.chunks_exact(9).zip(&self.nodes).zip(&self.coef) {
+            let jw = Matrix3::from_column_slice(j);
+            for a in 0..4 {
+                for b in 0..4 {
+                    emit(n[a], n[b], &(-c[a] * c[b] * jw));
+                }
+            }
+        }
+    }
+
     /// `grad W` on node `a` of constraint `i` is `k (3 / (A0 + A1)) w_a (e_i - p_i)`; `p_i`
     /// does not depend on `k`.
     fn stiffness_dot(&self, x: &[Vec3], z: &[Vec3]) -> f64 {

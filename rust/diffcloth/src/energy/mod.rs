@@ -22,6 +22,7 @@ pub use stretch::Stretch;
 use crate::config::BendModel;
 use crate::mesh::TriMesh;
 use crate::Vec3;
+use nalgebra::Matrix3;
 
 /// The bending constraints of a mesh in the scene's model: per interior edge ([`BendEdge`],
 /// the reference code's) or per interior vertex ([`Bend`]).
@@ -70,6 +71,11 @@ pub trait PdConstraints: Send + Sync {
     /// Appends `-dP` as triplets of the 3m x 3m node-major matrix (row `3 node + coordinate`),
     /// for the direct adjoint solve.
     fn add_neg_dp_triplets(&self, lin: &[f64], out: &mut Vec<(usize, usize, f64)>);
+    /// Calls `emit(a, b, block)` with each 3x3 block of `-dP` (entry `(r, s)` at row `3a + r`,
+    /// column `3b + s`; blocks of one node pair add up), for the assembled Hessian
+    /// ([`crate::hessian::StepHessian`]). Which pairs, in which order, depends on the mesh alone (never on `lin`): the
+    /// assembly maps each call to its matrix slot once.
+    fn for_each_neg_dp_block(&self, lin: &[f64], emit: &mut dyn FnMut(usize, usize, &Matrix3<f64>));
     /// `z . d(grad W)/dk` at `x`: the stiffness gradient is `-` this summed over steps.
     fn stiffness_dot(&self, x: &[Vec3], z: &[Vec3]) -> f64;
 }
@@ -246,8 +252,16 @@ pub(crate) mod testing {
         for (r, col, val) in t {
             assembled[r / 3][r % 3] -= val * v[col / 3][col % 3];
         }
+        let mut blocks = vec![Vec3::zeros(); n];
+        c.for_each_neg_dp_block(&lin, &mut |a, b, m| blocks[a] += m * v[b]);
         let mut free = vec![Vec3::zeros(); n];
         c.sub_dp(&lin, &v, &mut free);
+        for i in 0..n {
+            assert!(
+                (blocks[i] - free[i]).amax() <= 1e-12 * scale.max(1.0),
+                "dP blocks differ from sub_dp at node {i}"
+            );
+        }
         for i in 0..n {
             assert!(
                 (assembled[i] + free[i]).amax() <= 1e-12 * scale.max(1.0),

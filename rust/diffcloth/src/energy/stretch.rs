@@ -7,7 +7,7 @@
 use super::{PdConstraints, Projections, Stiffness, PARALLEL_MIN_CONSTRAINTS};
 use crate::mesh::TriMesh;
 use crate::Vec3;
-use nalgebra::{Matrix2, Matrix3x2, Vector2};
+use nalgebra::{Matrix2, Matrix3, Matrix3x2, Vector2};
 use rayon::prelude::*;
 
 pub type Mat32 = Matrix3x2<f64>;
@@ -210,6 +210,29 @@ impl PdConstraints for Stretch {
                             out.push((3 * tri[l] + c, 3 * tri[m] + e, -val));
                         }
                     }
+                }
+            }
+        }
+    }
+
+    fn for_each_neg_dp_block(
+        &self,
+        lin: &[f64],
+        emit: &mut dyn FnMut(usize, usize, &Matrix3<f64>),
+    ) {
+        let rows = self.triangles.iter().zip(&self.shape);
+        for ((tri, b), j) in rows.zip(lin.chunks_exact(JACOBIAN_LEN)) {
+            // (w J) in 3x3 blocks J_km (row block k, column block m of the 6x6 on vec F).
+            let jb = |k: usize, m: usize| Matrix3::from_fn(|c, e| j[6 * (c + 3 * k) + e + 3 * m]);
+            let blocks = [jb(0, 0), jb(0, 1), jb(1, 0), jb(1, 1)];
+            for l in 0..3 {
+                for m in 0..3 {
+                    let (bl, bm) = (b[l], b[m]);
+                    let block = blocks[0] * (bl[0] * bm[0])
+                        + blocks[1] * (bl[0] * bm[1])
+                        + blocks[2] * (bl[1] * bm[0])
+                        + blocks[3] * (bl[1] * bm[1]);
+                    emit(tri[l], tri[m], &-block);
                 }
             }
         }

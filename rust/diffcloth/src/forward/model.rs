@@ -11,6 +11,7 @@ use crate::effects::Effects;
 use crate::energy::{bending, Attachments, PdConstraints, Stiffness, Stretch};
 use crate::error::{Error, Result};
 use crate::forces::Wind;
+use crate::hessian::HessianPattern;
 use crate::linalg::SpdFactor;
 use crate::mesh::TriMesh;
 use crate::params::{validate_params, Params};
@@ -19,6 +20,7 @@ use crate::scene::{
     params_from_config, strain_limits,
 };
 use crate::Vec3;
+use std::sync::{Arc, OnceLock};
 
 pub struct Model {
     pub(crate) config: SceneConfig,
@@ -37,6 +39,9 @@ pub struct Model {
     pub(crate) self_collision: Option<SelfCollision>,
     pub(crate) contact_settings: ContactSettings,
     pub(crate) factor: SpdFactor,
+    /// The step Hessian's pattern and symbolic analysis (`hessian.rs`), built on first use
+    /// (None: it could not be analysed). Values never enter it, so a copy keeps it.
+    pub(crate) hessian: OnceLock<Option<Arc<HessianPattern>>>,
 }
 
 impl Clone for Model {
@@ -57,6 +62,7 @@ impl Clone for Model {
             self_collision: self.self_collision.clone(),
             contact_settings: self.contact_settings.clone(),
             factor: self.factor.clone(),
+            hessian: self.hessian.clone(),
         }
     }
 }
@@ -127,10 +133,18 @@ impl Model {
             self_collision,
             contact_settings,
             factor: SpdFactor::new(1, &[(0, 0, 1.0)])?,
+            hessian: OnceLock::new(),
             mesh,
         };
         model.factor = SpdFactor::new(n, &model.system_triplets()).map_err(explain_singular)?;
         Ok(model)
+    }
+
+    /// The step Hessian's shared pattern and analysis, built on first call.
+    pub(crate) fn hessian_pattern(&self) -> Option<Arc<HessianPattern>> {
+        self.hessian
+            .get_or_init(|| HessianPattern::new(self).ok().map(Arc::new))
+            .clone()
     }
 
     /// Every elastic constraint set the scene simulates, in a fixed order.
