@@ -20,7 +20,7 @@ timing pairs for up to S seconds per size until ``--repeats`` quiet ones are fou
 benchmarks/results/env_throughput.{json,md} (or ``--out-dir``).
 
 Run: python -m benchmarks env_throughput [--quick] [--envs Hat-v0 ...] [--measures vector]
-     [--sizes 8 32] [--quiet-wait 300] [--out-dir DIR]
+     [--sizes 8 32] [--steps 100] [--quiet-wait 300] [--out-dir DIR]
 """
 
 from __future__ import annotations
@@ -204,8 +204,11 @@ def main(argv: list[str] | None = None) -> int:
                         help="which measures (default: all)")
     parser.add_argument("--sizes", nargs="*", type=int, default=None, help="vector sizes (default 1 2 8 32)")
     parser.add_argument("--out-dir", default=None, help="write the results here instead of benchmarks/results")
+    parser.add_argument("--steps", type=int, default=None,
+                        help="steps per timing (default 20, 3 with --quick); longer timings label the others' "
+                             "use more precisely (/proc/stat counts 10 ms ticks)")
     args = parser.parse_args(argv)
-    steps = 3 if args.quick else 20
+    steps = args.steps or (3 if args.quick else 20)
     sizes = args.sizes or ([1, 2] if args.quick else SIZES)
     rows = []
     for env_id in args.envs:
