@@ -159,6 +159,11 @@ def test_compare_writes_results_and_marks_a_stopped_run_partial(tmp_path):
     assert [s["forward"] for s in data["runs"]] == [2 * HORIZON, 200]
     assert data["runs"][0]["reach_1.1x_apg"] is not None  # APG reaches its own final loss
     # A deadline already passed: nothing trains, the longer budget is partial, and says so.
-    longer = {**budget, "apg": {**budget["apg"], "epochs": 3}}
-    r = compare.run(longer, out=tmp_path, progress=False, max_minutes=0, gif=False, command="pytest")
-    assert r["partial"] and "PARTIAL" in (tmp_path / "hat_controller.md").read_text()
+    # Seed 1 has no checkpoint: it does not start (not even its first evaluation).
+    longer = {**budget, "seeds": [0, 1], "apg": {**budget["apg"], "epochs": 3}}
+    r = compare.run(longer, out=tmp_path, progress=False, max_minutes=0, gif=False, command="pytest",
+                    resume_command="resume-here")
+    md = (tmp_path / "hat_controller.md").read_text()
+    assert r["partial"] and "PARTIAL" in md and "Resume with `resume-here`" in md
+    assert [s["curve"] == [] for s in r["runs"]] == [False, False, True, True]
+    assert md.count("| not started |") == 2 and r["per_method"]["apg"]["seeds"] == 2

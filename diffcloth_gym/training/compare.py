@@ -201,11 +201,12 @@ def markdown(results: Mapping[str, Any], name: str) -> str:
               "backward steps | steps to 1.1x APG | train s | eval s |",
               "|---|---|---|---|---|---|---|---|---|---|---|"]
     for s in r["runs"]:
-        reach = s["reach_1.1x_apg"]
-        lines.append(f"| {s['method'].upper()} | {s['seed']} | {'yes' if s['complete'] else 'no'} | "
+        reach, started = s["reach_1.1x_apg"], bool(s["curve"])
+        done = "yes" if s["complete"] else ("no" if started else "not started")
+        lines.append(f"| {s['method'].upper()} | {s['seed']} | {done} | "
                      f"{_f(s['final_test_loss'])} | {_f(s['success_rate'], '{:.0%}')} | {s['forward']:,} | "
                      f"{s['paper_steps']:,} | {s['backward']:,} | "
-                     f"{'not reached' if reach is None else format(reach['steps'], ',')} | "
+                     f"{'-' if not started else 'not reached' if reach is None else format(reach['steps'], ',')} | "
                      f"{s['train_s']:.0f} | {s['eval_s']:.0f} |")
     ratio = r["ppo_over_apg_steps_to_target"]
     why = ("n/a (the initial policies are already within 1.1x of APG's final loss: budget too short)"
