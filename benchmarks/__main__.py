@@ -3,7 +3,8 @@
 Studies: ``accuracy`` (what each accuracy knob costs in time: forward Pareto fronts, the
 backward solver table, gradient error vs forward tolerance, time step), ``stability`` (the
 hard-case suite; ``--full`` for the full size), ``step_time`` (forward ms/step per solver
-setting, and the contact scenes), ``backward_time`` (adjoint ms/step per solver),
+setting, and the contact scenes), ``backward_time`` (adjoint ms/step per solver), ``gradient_cost``
+(forward + polish + backward ms/step at the envs' accuracy and the gradient's error),
 ``env_throughput`` (env steps/s single and batched, step_grad cost, frames/s), ``render``
 (frames/s of the software renderer; ``render --images`` writes docs/images/) and ``openloop``
 (open-loop optimization: ``openloop fig4``, the paper's Fig. 4; results ``openloop.{json,md}``). Each writes
@@ -21,6 +22,7 @@ STUDIES = {
     "stability": "benchmarks.stability",
     "step_time": "benchmarks.step_time",
     "backward_time": "benchmarks.backward_time",
+    "gradient_cost": "benchmarks.gradient_cost",
     "env_throughput": "benchmarks.env_throughput",
     "render": "benchmarks.render",
     "openloop": "benchmarks.openloop",

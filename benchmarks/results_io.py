@@ -73,3 +73,10 @@ def write(name: str, rows: list[dict], meta_block: dict, title: str, notes: str 
     md.append(markdown_table(rows, columns))
     (out / f"{name}.md").write_text("\n".join(md) + "\n")
     return out / f"{name}.json"
+
+
+def read_rows(name: str, out_dir: Path | None = None) -> list[dict]:
+    """The rows of an earlier ``write(name, ...)``, or [] if there is none (for studies whose
+    runs replace only part of the table)."""
+    path = Path(out_dir or RESULTS_DIR) / f"{name}.json"
+    return json.loads(path.read_text())["rows"] if path.exists() else []
