@@ -105,23 +105,28 @@ def cases(names: Sequence[str], quick: bool) -> list:
         "hat": lambda: hat_case(short or 400),
         "sock": lambda: sock_case(short or 400),
         "wind24x24": lambda: Case("wind24x24", load_scene("wind", rows=24, cols=24), short or 100),
-        "sphere24x24": lambda: sphere_case(24, short or 60),
-        "sphere48x48": lambda: sphere_case(48, short or 40),
-        "sphere96x96": lambda: sphere_case(96, short or 25),
+        "sphere24x24": lambda: sphere_case(24, short or 150),
+        "sphere48x48": lambda: sphere_case(48, short or 100),
+        "sphere96x96": lambda: sphere_case(96, short or 50),
     }
     return [makers[n] for n in names]
 
 
 def rollout(case: Case, settings: dict) -> tuple[Simulator, dict, float]:
-    """Recorded rollout; returns the simulator (tape kept), its profile and the unconverged share."""
+    """Recorded rollout; returns the simulator (tape kept), its profile (with
+    ``pushing_steps``: steps ending with a contact that pushes) and the unconverged share."""
     sim = Simulator.from_config(case.cfg)
     sim.set_solver(parallel=False, **settings)
     sim.reset(x=case.x0, v=case.v0)
     sim.set_recording(True)
     sim.reset_profile()
+    pushing = 0
     for k in range(case.steps):
         sim.step(attachment_targets=None if case.targets is None else case.targets[k])
+        c = sim.last_step()["contacts"]
+        pushing += c["stick"] + c["slip"] > 0
     prof = sim.profile()
+    prof["pushing_steps"] = pushing
     return sim, prof, prof["unconverged_steps"] / case.steps
 
 
@@ -157,6 +162,7 @@ def measure(case: Case, label: str) -> list[dict]:
             "pd_iters": prof["iterations"] / steps,
             "newton_steps": prof["newton_steps"] / steps,
             "newton_ms": 1e3 * prof["newton_s"] / steps,
+            "contact_steps_pct": 100 * prof["pushing_steps"] / steps,
             "contact_ms": 1e3 * (prof["contact_s"] + prof["detection_s"]) / steps,
             "unconverged_pct": 100 * unconv,
             "bwd_ms": 1e3 * wall / steps,
