@@ -15,6 +15,11 @@
 //!   --processes       instead: the machine's ceiling, one 1-thread process of the workload
 //!                     alone vs two at once (aggregate rate), alternating, `--repeats` times
 //!   --forkjoin        instead: the fixed cost of one parallel call (a step) on 1 and 2 threads
+//!   --gap US          busy-wait US microseconds on the calling thread between steps (an env's
+//!                     serial Python part; idle workers fall asleep meanwhile), not timed
+//!   --install         also time, interleaved, the members stepped the way `Batch::step` did
+//!                     before the caller took part (`pool.install` + `par_iter_mut`); the
+//!                     thread list's entries then read 1, 2 (Batch) and 1, 2 (install)
 //!   --quiet C         also summarize only pairs during which the other processes (the other
 //!                     agents, steal included) used less than C cores (default 0.15)
 //!
@@ -65,6 +70,8 @@ struct Opts {
     processes: bool,
     forkjoin: bool,
     quiet: f64,
+    gap_us: u64,
+    install: bool,
 }
 
 fn parse() -> Opts {
@@ -79,6 +86,8 @@ fn parse() -> Opts {
         processes: false,
         forkjoin: false,
         quiet: 0.15,
+        gap_us: 0,
+        install: false,
     };
     let args: Vec<String> = std::env::args().skip(1).collect();
     let list = |s: &str| -> Vec<f64> { s.split(',').map(|v| v.parse().unwrap()).collect() };
@@ -105,6 +114,11 @@ fn parse() -> Opts {
                 i -= 1;
             }
             "--quiet" => o.quiet = v.parse().unwrap(),
+            "--gap" => o.gap_us = v.parse().unwrap(),
+            "--install" => {
+                o.install = true;
+                i -= 1;
+            }
             a => panic!("unknown argument {a}"),
         }
         i += 2;
@@ -150,14 +164,80 @@ struct Episode {
     final_x: Vec<Vec<Vec3>>,
 }
 
+/// How an episode's steps are run: the batch, or `pool.install` over the members (the old
+/// `Batch::step`; `solver.parallel` off, as the batch turned member splitting off).
+#[derive(Clone, Copy)]
+enum Stepper {
+    Batch,
+    Install,
+}
+
+/// Members stepped by `pool.install(par_iter_mut)`.
+struct Installed {
+    pool: rayon::ThreadPool,
+    sims: Vec<Simulator>,
+}
+
+impl Installed {
+    fn step(&mut self, inputs: &[MemberInput<'_>]) -> Vec<diffcloth::Result<diffcloth::StepStats>> {
+        use rayon::prelude::*;
+        let sims = &mut self.sims;
+        self.pool.install(|| {
+            sims.par_iter_mut()
+                .zip(inputs)
+                .map(|(s, i)| {
+                    s.step(diffcloth::StepInput {
+                        attachment_targets: i.attachment_targets,
+                        external_forces: i.external_forces,
+                    })
+                })
+                .collect()
+        })
+    }
+}
+
+fn busy(us: u64) {
+    let t = Instant::now();
+    while t.elapsed().as_micros() < us as u128 {
+        std::hint::spin_loop();
+    }
+}
+
 fn episode(
     model: &Arc<Model>,
     solver: &SolverSettings,
     threads: usize,
     forces: &[Vec<Vec<Vec3>>],
 ) -> Episode {
+    episode_with(model, solver, threads, forces, Stepper::Batch, 0)
+}
+
+fn episode_with(
+    model: &Arc<Model>,
+    solver: &SolverSettings,
+    threads: usize,
+    forces: &[Vec<Vec<Vec3>>],
+    stepper: Stepper,
+    gap_us: u64,
+) -> Episode {
     let size = forces[0].len();
     let mut batch = Batch::with_threads(model.clone(), solver.clone(), size, threads).unwrap();
+    let mut installed = matches!(stepper, Stepper::Install).then(|| Installed {
+        pool: rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap(),
+        sims: (0..size)
+            .map(|_| {
+                let serial = SolverSettings {
+                    parallel: false,
+                    ..solver.clone()
+                };
+                Simulator::from_model(model.clone(), serial)
+            })
+            .collect(),
+    });
+    let mut gap = std::time::Duration::ZERO;
     let mut iterations = vec![0u64; size];
     let mut inputs: Vec<MemberInput> = Vec::with_capacity(size);
     // Per step and member: time in `step` (profile) and PD iterations (filled in place).
@@ -177,16 +257,29 @@ fn episode(
             attachment_targets: None,
             external_forces: Some(f),
         }));
-        for (i, r) in batch.step(&inputs).unwrap().into_iter().enumerate() {
+        let results = match installed.as_mut() {
+            Some(inst) => inst.step(&inputs),
+            None => batch.step(&inputs).unwrap(),
+        };
+        for (i, r) in results.into_iter().enumerate() {
             let n = r.unwrap().iterations;
             iterations[i] += n as u64;
             step_iterations[k][i] = n as f64;
         }
-        for (c, s) in costs[k].iter_mut().zip(batch.members()) {
+        let members: Vec<&Simulator> = match installed.as_ref() {
+            Some(inst) => inst.sims.iter().collect(),
+            None => batch.members().collect(),
+        };
+        for (c, s) in costs[k].iter_mut().zip(members) {
             *c = s.profile().total.as_secs_f64();
         }
+        if gap_us > 0 {
+            let g = Instant::now();
+            busy(gap_us);
+            gap += g.elapsed();
+        }
     }
-    let seconds = start.elapsed().as_secs_f64();
+    let seconds = (start.elapsed() - gap).as_secs_f64();
     let allocs = ALLOCS.load(Ordering::Relaxed) - a1;
     let usage = sched::between(&t0, &sched::snapshot());
     // Cumulative profile times to per-step costs.
@@ -204,7 +297,10 @@ fn episode(
         iterations,
         first_step_allocs: a1 - a0,
         allocs_per_step: allocs as f64 / (forces.len() - 1).max(1) as f64,
-        final_x: batch.members().map(|s| s.positions().to_vec()).collect(),
+        final_x: match installed.as_ref() {
+            Some(inst) => inst.sims.iter().map(|s| s.positions().to_vec()).collect(),
+            None => batch.members().map(|s| s.positions().to_vec()).collect(),
+        },
     }
 }
 
@@ -324,35 +420,43 @@ fn scaling(o: &Opts) {
             let forces = make_forces(model.num_nodes(), size, o.steps, scale);
             // Warm-up (first touches, thread start), and the reference for the bitwise check.
             let reference = episode(&model, &solver, 1, &forces);
-            let mut repeats = Vec::new();
+            let steppers: &[(&str, Stepper)] = if o.install {
+                &[("batch", Stepper::Batch), ("install", Stepper::Install)]
+            } else {
+                &[("batch", Stepper::Batch)]
+            };
+            let mut all_repeats: Vec<Vec<Repeat>> = steppers.iter().map(|_| Vec::new()).collect();
             let (mut allocs, mut first) = (0.0f64, 0u64);
             for rep in 0..o.repeats {
-                let mut order: Vec<usize> = (0..o.threads.len()).collect();
-                if rep % 2 == 1 {
-                    order.reverse();
-                }
-                let n = o.threads.len();
-                let mut r = Repeat {
-                    rate: vec![0.0; n],
-                    cpu_us: vec![0.0; n],
-                    wait: vec![0.0; n],
-                    cores: vec![0.0; n],
-                    others: 0.0,
-                };
-                for &t in &order {
-                    let e = episode(&model, &solver, o.threads[t], &forces);
-                    assert!(e.final_x == reference.final_x, "not bitwise identical");
-                    allocs = allocs.max(e.allocs_per_step);
-                    first = first.max(e.first_step_allocs);
-                    let u = &e.usage;
-                    r.rate[t] = (size * o.steps) as f64 / e.seconds;
-                    r.cpu_us[t] = 1e6 * u.cpu / (size * o.steps) as f64;
-                    r.wait[t] = u.wait / (u.wait + u.cpu);
-                    r.cores[t] = u.cpu / e.seconds;
-                    r.others = r.others.max(u.others / e.seconds);
-                }
-                println!(
-                    "  rep N={size} scale={scale}: rate {:?} CPU us {:?} cores obtained {:?} \
+                for (si, &(label, stepper)) in steppers.iter().enumerate() {
+                    let repeats = &mut all_repeats[si];
+                    let mut order: Vec<usize> = (0..o.threads.len()).collect();
+                    if rep % 2 == 1 {
+                        order.reverse();
+                    }
+                    let n = o.threads.len();
+                    let mut r = Repeat {
+                        rate: vec![0.0; n],
+                        cpu_us: vec![0.0; n],
+                        wait: vec![0.0; n],
+                        cores: vec![0.0; n],
+                        others: 0.0,
+                    };
+                    for &t in &order {
+                        let e =
+                            episode_with(&model, &solver, o.threads[t], &forces, stepper, o.gap_us);
+                        assert!(e.final_x == reference.final_x, "not bitwise identical");
+                        allocs = allocs.max(e.allocs_per_step);
+                        first = first.max(e.first_step_allocs);
+                        let u = &e.usage;
+                        r.rate[t] = (size * o.steps) as f64 / e.seconds;
+                        r.cpu_us[t] = 1e6 * u.cpu / (size * o.steps) as f64;
+                        r.wait[t] = u.wait / (u.wait + u.cpu);
+                        r.cores[t] = u.cpu / e.seconds;
+                        r.others = r.others.max(u.others / e.seconds);
+                    }
+                    println!(
+                    "  rep N={size} scale={scale} {label}: rate {:?} CPU us {:?} cores obtained {:?} \
                      others {:.2} cores",
                     r.rate.iter().map(|x| x.round()).collect::<Vec<_>>(),
                     r.cpu_us.iter().map(|x| x.round()).collect::<Vec<_>>(),
@@ -362,7 +466,8 @@ fn scaling(o: &Opts) {
                         .collect::<Vec<_>>(),
                     r.others
                 );
-                repeats.push(r);
+                    repeats.push(r);
+                }
             }
             let mut its = reference.iterations.clone();
             its.sort();
@@ -388,7 +493,10 @@ fn scaling(o: &Opts) {
                      longest-predicted-first {longest:.3}x"
                 );
             }
-            summarize(&o.threads, &repeats, o.quiet);
+            for ((label, _), repeats) in steppers.iter().zip(&all_repeats) {
+                println!("  {label} (gap {} us between steps):", o.gap_us);
+                summarize(&o.threads, repeats, o.quiet);
+            }
         }
     }
 }
@@ -541,18 +649,21 @@ fn main() {
     let o = parse();
     if o.forkjoin {
         for rep in 0..o.repeats {
-            for work in [100, 1000] {
-                let before = sched::snapshot();
-                let start = Instant::now();
-                let one = forkjoin::overhead(1, work, 300);
-                let two = forkjoin::overhead(2, work, 300);
-                let others = sched::between(&before, &sched::snapshot()).others
-                    / start.elapsed().as_secs_f64();
-                println!(
-                    "  rep {rep} forkjoin work {work} us: overhead per call (median, p90) 1 thread \
-                     {:.0} {:.0} us, 2 threads {:.0} {:.0} us; others {others:.2} cores",
-                    one.0, one.1, two.0, two.1
-                );
+            for (work, gap) in [(100, 0), (1000, 0), (1000, 1700)] {
+                for caller in [false, true] {
+                    let before = sched::snapshot();
+                    let start = Instant::now();
+                    let one = forkjoin::overhead(1, work, gap, caller, 300);
+                    let two = forkjoin::overhead(2, work, gap, caller, 300);
+                    let others = sched::between(&before, &sched::snapshot()).others
+                        / start.elapsed().as_secs_f64();
+                    println!(
+                        "  rep {rep} forkjoin work {work} us gap {gap} us caller works {caller}: \
+                         overhead per call (median, p90) 1 thread {:.0} {:.0} us, 2 threads {:.0} \
+                         {:.0} us; others {others:.2} cores",
+                        one.0, one.1, two.0, two.1
+                    );
+                }
             }
         }
     } else if o.spin {
