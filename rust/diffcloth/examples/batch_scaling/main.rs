@@ -196,6 +196,8 @@ struct Repeat {
     wait: Vec<f64>,
     /// Cores the process obtained (CPU seconds over wall seconds).
     cores: Vec<f64>,
+    /// Times the process's threads went to sleep, per step (a load-independent count).
+    sleeps: Vec<f64>,
     others: f64,
 }
 
@@ -220,15 +222,17 @@ fn summarize(threads: &[usize], repeats: &[Repeat], quiet: f64) {
             let cpu: Vec<f64> = set.iter().map(|r| r.cpu_us[k]).collect();
             let wait: Vec<f64> = set.iter().map(|r| r.wait[k]).collect();
             let cores: Vec<f64> = set.iter().map(|r| r.cores[k]).collect();
+            let sleeps: Vec<f64> = set.iter().map(|r| r.sleeps[k]).collect();
             let (lo, hi) = min_max(&rate);
             println!(
                 "    {label:5} {t} thr: member-steps/s best {hi:7.0} median {:7.0} worst {lo:7.0}; \
                  CPU us/member-step median {:6.1}; cores obtained median {:.2}; waiting for a \
-                 core {:4.1} %",
+                 core {:4.1} %; thread sleeps per step median {:.2}",
                 median(&rate),
                 median(&cpu),
                 median(&cores),
-                100.0 * median(&wait)
+                100.0 * median(&wait),
+                median(&sleeps)
             );
         }
         let ratios: Vec<f64> = set.iter().map(|r| r.rate[last] / r.rate[0]).collect();
@@ -290,6 +294,7 @@ fn scaling(o: &Opts) {
                         cpu_us: vec![0.0; n],
                         wait: vec![0.0; n],
                         cores: vec![0.0; n],
+                        sleeps: vec![0.0; n],
                         others: 0.0,
                     };
                     for &t in &order {
@@ -303,6 +308,7 @@ fn scaling(o: &Opts) {
                         r.cpu_us[t] = 1e6 * u.cpu / (size * o.steps) as f64;
                         r.wait[t] = u.wait / (u.wait + u.cpu);
                         r.cores[t] = u.cpu / e.seconds;
+                        r.sleeps[t] = u.sleeps as f64 / o.steps as f64;
                         r.others = r.others.max(u.others / e.seconds);
                     }
                     println!(
@@ -413,6 +419,7 @@ fn processes(o: &Opts) {
             cpu_us: vec![0.0; 2],
             wait: vec![0.0; 2],
             cores: vec![0.0; 2],
+            sleeps: vec![0.0; 2],
             others: 0.0,
         };
         let order = if rep % 2 == 0 { [1, 2] } else { [2, 1] };
@@ -461,6 +468,7 @@ fn spin(o: &Opts) {
                 cpu_us: vec![0.0; 2],
                 wait: vec![0.0; 2],
                 cores: vec![0.0; 2],
+                sleeps: vec![0.0; 2],
                 others: 0.0,
             };
             let order = if rep % 2 == 0 { [0, 1] } else { [1, 0] };
