@@ -203,13 +203,20 @@ impl Batch {
                 )));
             }
         }
-        Ok(self.in_pool(|members| {
-            members
-                .par_iter_mut()
-                .zip(dl_dx.par_iter().zip(dl_dv))
-                .map(|(m, (gx, gv))| m.sim.backward_step(k, gx, gv, options, &mut m.warm))
-                .collect()
-        }))
+        // A member's adjoint runs on one thread (no nested splitting), so the caller shares
+        // in the work whatever the batch size.
+        let threads = self.threads();
+        let tasks: Vec<_> = self
+            .members
+            .iter_mut()
+            .zip(dl_dx.iter().zip(dl_dv))
+            .collect();
+        Ok(shared::run(
+            self.pool.as_ref(),
+            threads,
+            tasks,
+            |(m, (gx, gv))| m.sim.backward_step(k, gx, gv, options, &mut m.warm),
+        ))
     }
 
     fn index_error(&self, i: usize) -> Error {
