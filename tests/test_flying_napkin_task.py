@@ -88,6 +88,16 @@ def test_loss_is_zero_at_the_target(small):
     assert task.success(x, zero, c).all()
 
 
+def test_distance_is_the_mean_squared_node_distance_bitwise():
+    # The loss spells out x + y + z (speed); it must stay bitwise torch's sum over the axis,
+    # so rewards do not change with the spelling. Random batches of the default 10 x 10 napkin.
+    _, _, task = build()
+    x = torch.as_tensor(task.target, dtype=F64) + torch.randn(32, 100, 3, dtype=F64,
+                                                              generator=torch.Generator().manual_seed(0))
+    want = ((x - torch.as_tensor(task.target, dtype=F64)) ** 2).sum(dim=-1).mean(dim=-1)
+    assert torch.equal(task.mean_squared_distance(x), want)
+
+
 def test_reward_weights(small):
     _, sim, task = small
     x = batch(sim.rest_positions)

@@ -39,3 +39,45 @@ def test_ppo_trains_on_the_sb3_adapter():
     assert model.num_timesteps == 64
     action, _ = model.predict(venv.reset(), deterministic=True)
     assert action.shape == (2, venv.action_space.shape[0])
+
+
+def _gymnasium_infos(venv, r, live):
+    """What Gymnasium's own ``VectorEnv._add_info`` builds from the live members' info dicts."""
+    infos = {}
+    for i in np.flatnonzero(live):
+        infos = venv._add_info(infos, r.info(i), int(i))
+    return infos
+
+
+def test_vector_infos_equal_gymnasiums_merge_of_the_members_infos():
+    from diffcloth_gym.envs.vector import vector_infos
+
+    venv = gym.make_vec("DiffCloth/FlyingNapkin-v0", num_envs=3, **NAPKIN).unwrapped
+    venv.task.horizon = 2
+    venv.reset(seed=0)
+    engine = venv.engine
+    bound = venv.single_action_space.high
+    # Member 1 over the bounds (clipped entries counted), then the horizon (success extras), then
+    # member 0 starting over while the others step (not live in this step's infos).
+    for k, live in enumerate([[1, 1, 1], [1, 1, 1], [0, 1, 1]]):
+        a = np.zeros((3, venv.single_action_space.shape[0]))
+        a[1, :4] = 3 * bound[:4]
+        if k == 2:
+            engine.reset([0], [venv.task.sample_start(np.random.default_rng(1))])
+        r = engine.step(a)
+        live = np.array(live, dtype=bool)
+        got, want = vector_infos(r, live), _gymnasium_infos(venv, r, live)
+        assert list(got) == list(want)
+        for key in want:
+            assert got[key].dtype == want[key].dtype and np.array_equal(got[key], want[key]), key
+        assert got["action_clipped"].tolist() == [0, 4 * live[1], 0]
+    assert "success" in want and want["_success"].tolist() == [False, True, True]
+
+
+def test_vector_env_step_counts_clipped_action_entries():
+    venv = gym.make_vec("DiffCloth/FlyingNapkin-v0", num_envs=2, **NAPKIN)
+    venv.reset(seed=0)
+    a = np.zeros((2, venv.single_action_space.shape[0]))
+    a[0, :5] = 2.0
+    *_, infos = venv.step(a)
+    assert infos["action_clipped"].tolist() == [5, 0]

@@ -203,7 +203,11 @@ class FlyingNapkinTask(ClothTask):
 
     def mean_squared_distance(self, x: torch.Tensor) -> torch.Tensor:
         """Mean squared node distance to the target pose, (B,)."""
-        return ((x - self._target.to(x)) ** 2).sum(dim=-1).mean(dim=-1)
+        q = (x - self._target.to(x)) ** 2
+        # x + y + z spelled out: bitwise torch's .sum(dim=-1) over the 3 components, and 6x
+        # faster on (32, 100, 3) (a reduction kernel over a size-3 axis costs ~0.1 ms, as much
+        # as the rest of the step's Python, which runs serially between parallel steps).
+        return (q[..., 0] + q[..., 1] + q[..., 2]).mean(dim=-1)
 
     def loss_terms(self, x: torch.Tensor, v: torch.Tensor, control: torch.Tensor,
                    step: int) -> dict[str, torch.Tensor]:

@@ -17,7 +17,7 @@ import torch
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 
-from diffcloth_gym.envs.engine import ClothEngine
+from diffcloth_gym.envs.engine import ClothEngine, StepResult
 from diffcloth_gym.envs.task import ClothTask
 
 
@@ -30,6 +30,30 @@ def seeded_generators(seed: int | list[int | None] | None, n: int) -> list[np.ra
             raise ValueError(f"seed: one per env ({n}), got {len(seed)}")
         seeds = list(seed)
     return [seeding.np_random(s)[0] for s in seeds]
+
+
+def vector_infos(r: StepResult, live: np.ndarray) -> dict[str, Any]:
+    """Gymnasium's vector info dict of the members ``live`` (a bool mask): what
+    ``VectorEnv._add_info`` builds from each live member's info dict (every key an array over
+    the members, zero where absent, and a ``_key`` mask), made from the step's columns at
+    once. Values of a key only some members have (solver errors, success) are grouped the
+    same way, by the type of the first one."""
+    infos: dict[str, Any] = {}
+    for name, col in r.columns.items():
+        infos[name] = np.where(live, col, np.zeros((), dtype=col.dtype))
+        infos[f"_{name}"] = live.copy()
+    for i, extra in sorted(r.extras.items()):
+        if not live[i]:
+            continue
+        for key, value in extra.items():
+            if key not in infos:
+                known = type(value) in (int, float, bool)
+                infos[key] = np.zeros(len(live), dtype=type(value)) if known \
+                    else np.full(len(live), None, dtype=object)
+                infos[f"_{key}"] = np.zeros(len(live), dtype=bool)
+            infos[key][i] = value
+            infos[f"_{key}"][i] = True
+    return infos
 
 
 class ClothVectorEnv(VectorEnv):
@@ -73,7 +97,7 @@ class ClothVectorEnv(VectorEnv):
         return obs, {}
 
     def step(self, actions):
-        actions, _ = self.engine.check_action(actions)
+        checked = self.engine.check_action(actions)
         done = np.flatnonzero(self._needs_reset)
         starts = [self.task.sample_start(self._rngs[i]) for i in done]
         if len(done) == self.num_envs:
@@ -86,7 +110,7 @@ class ClothVectorEnv(VectorEnv):
             # The batch steps every member in one call: the ones that start over are stepped
             # from their new start (a wasted step on a sane state) and put back to it below.
             self.engine.reset(done.tolist(), starts)
-        r = self.engine.step(actions)
+        r = self.engine.step(checked)
         obs, reward = r.obs, r.reward
         terminated, truncated = r.terminated.copy(), r.truncated.copy()
         if len(done):
@@ -94,22 +118,17 @@ class ClothVectorEnv(VectorEnv):
             # observation; the action is ignored.
             obs[done] = self.engine.reset(done.tolist(), starts)
             reward[done], terminated[done], truncated[done] = 0.0, False, False
-        infos: dict[str, Any] = {}
-        for i, info in enumerate(r.infos):
-            if i not in done:
-                infos = self._add_info(infos, info, i)
+        live = np.ones(self.num_envs, dtype=bool)
+        live[done] = False
         self._needs_reset = terminated | truncated
-        return obs, reward, terminated, truncated, infos
+        return obs, reward, terminated, truncated, vector_infos(r, live)
 
     def step_grad(self, actions: torch.Tensor):
         """The batched differentiable step (see ``ClothEnv.step_grad``): ``actions`` (N,
         action_dim) float64 torch; returns obs (N, obs_dim) and rewards (N,) as tensors, and
         numpy terminated/truncated and the infos."""
         obs, reward, r = self.engine.step_grad(actions)
-        infos: dict[str, Any] = {}
-        for i, info in enumerate(r.infos):
-            infos = self._add_info(infos, info, i)
-        return obs, reward, r.terminated, r.truncated, infos
+        return obs, reward, r.terminated, r.truncated, vector_infos(r, np.ones(self.num_envs, dtype=bool))
 
     def render(self):
         if self.render_mode != "rgb_array":

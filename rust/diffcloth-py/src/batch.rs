@@ -7,7 +7,7 @@ use crate::errors::{guarded, to_py_err, InputError};
 use crate::simulator::PySimulator;
 use diffcloth::{Batch, MemberInput, Vec3};
 use numpy::ndarray::Array3;
-use numpy::{PyArray3, PyReadonlyArray2, PyReadonlyArray3, ToPyArray};
+use numpy::{IntoPyArray, PyArray3, PyReadonlyArray2, PyReadonlyArray3, ToPyArray};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
@@ -16,16 +16,19 @@ pub(crate) struct PyBatch {
     pub(crate) inner: Batch,
 }
 
-/// Rows of equal length as an (N, rows, 3) float64 array.
+/// Rows of equal length as an (N, rows, 3) float64 array (one buffer, handed to numpy
+/// without a second copy: an env reads positions and velocities every step, serially).
 fn members_to_py<'py>(py: Python<'py>, rows: &[&[Vec3]]) -> Bound<'py, PyArray3<f64>> {
     let per = rows.first().map_or(0, |r| r.len());
-    let flat: Vec<f64> = rows
-        .iter()
-        .flat_map(|r| r.iter().flat_map(|p| [p.x, p.y, p.z]))
-        .collect();
+    let mut flat = Vec::with_capacity(rows.len() * per * 3);
+    for r in rows {
+        for p in r.iter() {
+            flat.extend_from_slice(&[p.x, p.y, p.z]);
+        }
+    }
     Array3::from_shape_vec((rows.len(), per, 3), flat)
         .expect("members have equal row counts")
-        .to_pyarray(py)
+        .into_pyarray(py)
 }
 
 impl PyBatch {
@@ -186,6 +189,21 @@ impl PyBatch {
             .members()
             .map(|s| stats_dict(py, s.last_step()))
             .collect()
+    }
+
+    /// The last step's solver stats of every member as arrays (what an env reads every
+    /// step, without a dict per member): `iterations` (N,) int64, `residual` (N,) float64,
+    /// `converged` (N,) bool.
+    fn last_stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let stats: Vec<_> = self.inner.members().map(|s| s.last_step()).collect();
+        let d = PyDict::new(py);
+        let iterations: Vec<i64> = stats.iter().map(|s| s.iterations as i64).collect();
+        let residual: Vec<f64> = stats.iter().map(|s| s.residual).collect();
+        let converged: Vec<bool> = stats.iter().map(|s| s.converged).collect();
+        d.set_item("iterations", iterations.to_pyarray(py))?;
+        d.set_item("residual", residual.to_pyarray(py))?;
+        d.set_item("converged", converged.to_pyarray(py))?;
+        Ok(d)
     }
 
     /// The profile (times, iteration and contact counts) of member `index`.

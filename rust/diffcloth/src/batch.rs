@@ -5,6 +5,7 @@
 //! arithmetic does not depend on which thread runs it).
 
 use crate::backward::{AdjointWarmStart, BackwardOptions, Gradients};
+use crate::batch_shared as shared;
 use crate::error::{Error, Result};
 use crate::forward::{Model, Simulator, StepInput, StepStats};
 use crate::params::SolverSettings;
@@ -156,20 +157,31 @@ impl Batch {
                 inputs.len()
             )));
         }
-        let split_work = self.splits_member_work();
-        Ok(self.in_pool(|members| {
-            members
-                .par_iter_mut()
-                .zip(inputs)
-                .map(|(m, input)| {
-                    m.sim.split_work = split_work;
-                    m.sim.step(StepInput {
-                        attachment_targets: input.attachment_targets,
-                        external_forces: input.external_forces,
-                    })
-                })
-                .collect()
-        }))
+        let step = |m: &mut Member, input: &MemberInput<'_>, split_work: bool| {
+            m.sim.split_work = split_work;
+            m.sim.step(StepInput {
+                attachment_targets: input.attachment_targets,
+                external_forces: input.external_forces,
+            })
+        };
+        if self.splits_member_work() {
+            // Fewer members than threads: the members' own steps spread over the pool.
+            return Ok(self.in_pool(|members| {
+                members
+                    .par_iter_mut()
+                    .zip(inputs)
+                    .map(|(m, input)| step(m, input, true))
+                    .collect()
+            }));
+        }
+        let threads = self.threads();
+        let tasks: Vec<_> = self.members.iter_mut().zip(inputs).collect();
+        Ok(shared::run(
+            self.pool.as_ref(),
+            threads,
+            tasks,
+            |(m, input)| step(m, input, false),
+        ))
     }
 
     /// The one-step adjoint ([`Simulator::backward_step`]) of recorded step `k` of every
@@ -191,13 +203,20 @@ impl Batch {
                 )));
             }
         }
-        Ok(self.in_pool(|members| {
-            members
-                .par_iter_mut()
-                .zip(dl_dx.par_iter().zip(dl_dv))
-                .map(|(m, (gx, gv))| m.sim.backward_step(k, gx, gv, options, &mut m.warm))
-                .collect()
-        }))
+        // A member's adjoint runs on one thread (no nested splitting), so the caller shares
+        // in the work whatever the batch size.
+        let threads = self.threads();
+        let tasks: Vec<_> = self
+            .members
+            .iter_mut()
+            .zip(dl_dx.iter().zip(dl_dv))
+            .collect();
+        Ok(shared::run(
+            self.pool.as_ref(),
+            threads,
+            tasks,
+            |(m, (gx, gv))| m.sim.backward_step(k, gx, gv, options, &mut m.warm),
+        ))
     }
 
     fn index_error(&self, i: usize) -> Error {

@@ -7,6 +7,7 @@
 pub mod anderson;
 pub mod backward;
 pub mod batch;
+mod batch_shared;
 pub mod cancel;
 pub mod collision;
 pub mod config;

@@ -15,17 +15,25 @@
 //!   --processes       instead: the machine's ceiling, one 1-thread process of the workload
 //!                     alone vs two at once (aggregate rate), alternating, `--repeats` times
 //!   --forkjoin        instead: the fixed cost of one parallel call (a step) on 1 and 2 threads
+//!   --gap US          busy-wait US microseconds on the calling thread between steps (an env's
+//!                     serial Python part; idle workers fall asleep meanwhile), not timed
+//!   --install         also time, interleaved, the members stepped the way `Batch::step` did
+//!                     before the caller took part (`pool.install` + `par_iter_mut`); the
+//!                     thread list's entries then read 1, 2 (Batch) and 1, 2 (install)
 //!   --quiet C         also summarize only pairs during which the other processes (the other
 //!                     agents, steal included) used less than C cores (default 0.15)
 //!
 //! Every timed run is labelled with the other processes' CPU use while it ran (`sched.rs`):
 //! with 2 cores shared with other agents, only runs they left alone measure our scaling.
 //! A counting global allocator reports allocations per step inside the timed loop.
+mod episode;
 mod forkjoin;
 mod imbalance;
 mod sched;
 
-use diffcloth::{Batch, MemberInput, Model, Simulator, SolverSettings, Vec3};
+use episode::{episode, episode_with, Stepper};
+
+use diffcloth::{Model, Simulator, SolverSettings, Vec3};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -65,6 +73,8 @@ struct Opts {
     processes: bool,
     forkjoin: bool,
     quiet: f64,
+    gap_us: u64,
+    install: bool,
 }
 
 fn parse() -> Opts {
@@ -79,6 +89,8 @@ fn parse() -> Opts {
         processes: false,
         forkjoin: false,
         quiet: 0.15,
+        gap_us: 0,
+        install: false,
     };
     let args: Vec<String> = std::env::args().skip(1).collect();
     let list = |s: &str| -> Vec<f64> { s.split(',').map(|v| v.parse().unwrap()).collect() };
@@ -105,6 +117,11 @@ fn parse() -> Opts {
                 i -= 1;
             }
             "--quiet" => o.quiet = v.parse().unwrap(),
+            "--gap" => o.gap_us = v.parse().unwrap(),
+            "--install" => {
+                o.install = true;
+                i -= 1;
+            }
             a => panic!("unknown argument {a}"),
         }
         i += 2;
@@ -135,77 +152,6 @@ fn make_forces(n_nodes: usize, size: usize, steps: usize, scale: f64) -> Vec<Vec
                 .collect()
         })
         .collect()
-}
-
-struct Episode {
-    seconds: f64,
-    usage: sched::Usage,
-    costs: Vec<Vec<f64>>,
-    step_iterations: Vec<Vec<f64>>,
-    /// PD iterations of each member over the episode.
-    iterations: Vec<u64>,
-    first_step_allocs: u64,
-    /// Allocations per step after the first (the whole batch's step call).
-    allocs_per_step: f64,
-    final_x: Vec<Vec<Vec3>>,
-}
-
-fn episode(
-    model: &Arc<Model>,
-    solver: &SolverSettings,
-    threads: usize,
-    forces: &[Vec<Vec<Vec3>>],
-) -> Episode {
-    let size = forces[0].len();
-    let mut batch = Batch::with_threads(model.clone(), solver.clone(), size, threads).unwrap();
-    let mut iterations = vec![0u64; size];
-    let mut inputs: Vec<MemberInput> = Vec::with_capacity(size);
-    // Per step and member: time in `step` (profile) and PD iterations (filled in place).
-    let mut costs = vec![vec![0.0; size]; forces.len()];
-    let mut step_iterations = vec![vec![0.0; size]; forces.len()];
-    let t0 = sched::snapshot();
-    let a0 = ALLOCS.load(Ordering::Relaxed);
-    // Allocations after the first step: a new pool's first call sets up rayon's queues.
-    let mut a1 = a0;
-    let start = Instant::now();
-    for (k, f) in forces.iter().enumerate() {
-        if k == 1 {
-            a1 = ALLOCS.load(Ordering::Relaxed);
-        }
-        inputs.clear();
-        inputs.extend(f.iter().map(|f| MemberInput {
-            attachment_targets: None,
-            external_forces: Some(f),
-        }));
-        for (i, r) in batch.step(&inputs).unwrap().into_iter().enumerate() {
-            let n = r.unwrap().iterations;
-            iterations[i] += n as u64;
-            step_iterations[k][i] = n as f64;
-        }
-        for (c, s) in costs[k].iter_mut().zip(batch.members()) {
-            *c = s.profile().total.as_secs_f64();
-        }
-    }
-    let seconds = start.elapsed().as_secs_f64();
-    let allocs = ALLOCS.load(Ordering::Relaxed) - a1;
-    let usage = sched::between(&t0, &sched::snapshot());
-    // Cumulative profile times to per-step costs.
-    for k in (1..costs.len()).rev() {
-        let (a, b) = costs.split_at_mut(k);
-        for (c, p) in b[0].iter_mut().zip(&a[k - 1]) {
-            *c -= p;
-        }
-    }
-    Episode {
-        costs,
-        step_iterations,
-        seconds,
-        usage,
-        iterations,
-        first_step_allocs: a1 - a0,
-        allocs_per_step: allocs as f64 / (forces.len() - 1).max(1) as f64,
-        final_x: batch.members().map(|s| s.positions().to_vec()).collect(),
-    }
 }
 
 fn napkin() -> (Arc<Model>, SolverSettings) {
@@ -250,6 +196,8 @@ struct Repeat {
     wait: Vec<f64>,
     /// Cores the process obtained (CPU seconds over wall seconds).
     cores: Vec<f64>,
+    /// Times the process's threads went to sleep, per step (a load-independent count).
+    sleeps: Vec<f64>,
     others: f64,
 }
 
@@ -274,15 +222,17 @@ fn summarize(threads: &[usize], repeats: &[Repeat], quiet: f64) {
             let cpu: Vec<f64> = set.iter().map(|r| r.cpu_us[k]).collect();
             let wait: Vec<f64> = set.iter().map(|r| r.wait[k]).collect();
             let cores: Vec<f64> = set.iter().map(|r| r.cores[k]).collect();
+            let sleeps: Vec<f64> = set.iter().map(|r| r.sleeps[k]).collect();
             let (lo, hi) = min_max(&rate);
             println!(
                 "    {label:5} {t} thr: member-steps/s best {hi:7.0} median {:7.0} worst {lo:7.0}; \
                  CPU us/member-step median {:6.1}; cores obtained median {:.2}; waiting for a \
-                 core {:4.1} %",
+                 core {:4.1} %; thread sleeps per step median {:.2}",
                 median(&rate),
                 median(&cpu),
                 median(&cores),
-                100.0 * median(&wait)
+                100.0 * median(&wait),
+                median(&sleeps)
             );
         }
         let ratios: Vec<f64> = set.iter().map(|r| r.rate[last] / r.rate[0]).collect();
@@ -324,35 +274,45 @@ fn scaling(o: &Opts) {
             let forces = make_forces(model.num_nodes(), size, o.steps, scale);
             // Warm-up (first touches, thread start), and the reference for the bitwise check.
             let reference = episode(&model, &solver, 1, &forces);
-            let mut repeats = Vec::new();
+            let steppers: &[(&str, Stepper)] = if o.install {
+                &[("batch", Stepper::Batch), ("install", Stepper::Install)]
+            } else {
+                &[("batch", Stepper::Batch)]
+            };
+            let mut all_repeats: Vec<Vec<Repeat>> = steppers.iter().map(|_| Vec::new()).collect();
             let (mut allocs, mut first) = (0.0f64, 0u64);
             for rep in 0..o.repeats {
-                let mut order: Vec<usize> = (0..o.threads.len()).collect();
-                if rep % 2 == 1 {
-                    order.reverse();
-                }
-                let n = o.threads.len();
-                let mut r = Repeat {
-                    rate: vec![0.0; n],
-                    cpu_us: vec![0.0; n],
-                    wait: vec![0.0; n],
-                    cores: vec![0.0; n],
-                    others: 0.0,
-                };
-                for &t in &order {
-                    let e = episode(&model, &solver, o.threads[t], &forces);
-                    assert!(e.final_x == reference.final_x, "not bitwise identical");
-                    allocs = allocs.max(e.allocs_per_step);
-                    first = first.max(e.first_step_allocs);
-                    let u = &e.usage;
-                    r.rate[t] = (size * o.steps) as f64 / e.seconds;
-                    r.cpu_us[t] = 1e6 * u.cpu / (size * o.steps) as f64;
-                    r.wait[t] = u.wait / (u.wait + u.cpu);
-                    r.cores[t] = u.cpu / e.seconds;
-                    r.others = r.others.max(u.others / e.seconds);
-                }
-                println!(
-                    "  rep N={size} scale={scale}: rate {:?} CPU us {:?} cores obtained {:?} \
+                for (si, &(label, stepper)) in steppers.iter().enumerate() {
+                    let repeats = &mut all_repeats[si];
+                    let mut order: Vec<usize> = (0..o.threads.len()).collect();
+                    if rep % 2 == 1 {
+                        order.reverse();
+                    }
+                    let n = o.threads.len();
+                    let mut r = Repeat {
+                        rate: vec![0.0; n],
+                        cpu_us: vec![0.0; n],
+                        wait: vec![0.0; n],
+                        cores: vec![0.0; n],
+                        sleeps: vec![0.0; n],
+                        others: 0.0,
+                    };
+                    for &t in &order {
+                        let e =
+                            episode_with(&model, &solver, o.threads[t], &forces, stepper, o.gap_us);
+                        assert!(e.final_x == reference.final_x, "not bitwise identical");
+                        allocs = allocs.max(e.allocs_per_step);
+                        first = first.max(e.first_step_allocs);
+                        let u = &e.usage;
+                        r.rate[t] = (size * o.steps) as f64 / e.seconds;
+                        r.cpu_us[t] = 1e6 * u.cpu / (size * o.steps) as f64;
+                        r.wait[t] = u.wait / (u.wait + u.cpu);
+                        r.cores[t] = u.cpu / e.seconds;
+                        r.sleeps[t] = u.sleeps as f64 / o.steps as f64;
+                        r.others = r.others.max(u.others / e.seconds);
+                    }
+                    println!(
+                    "  rep N={size} scale={scale} {label}: rate {:?} CPU us {:?} cores obtained {:?} \
                      others {:.2} cores",
                     r.rate.iter().map(|x| x.round()).collect::<Vec<_>>(),
                     r.cpu_us.iter().map(|x| x.round()).collect::<Vec<_>>(),
@@ -362,7 +322,8 @@ fn scaling(o: &Opts) {
                         .collect::<Vec<_>>(),
                     r.others
                 );
-                repeats.push(r);
+                    repeats.push(r);
+                }
             }
             let mut its = reference.iterations.clone();
             its.sort();
@@ -388,7 +349,10 @@ fn scaling(o: &Opts) {
                      longest-predicted-first {longest:.3}x"
                 );
             }
-            summarize(&o.threads, &repeats, o.quiet);
+            for ((label, _), repeats) in steppers.iter().zip(&all_repeats) {
+                println!("  {label} (gap {} us between steps):", o.gap_us);
+                summarize(&o.threads, repeats, o.quiet);
+            }
         }
     }
 }
@@ -455,6 +419,7 @@ fn processes(o: &Opts) {
             cpu_us: vec![0.0; 2],
             wait: vec![0.0; 2],
             cores: vec![0.0; 2],
+            sleeps: vec![0.0; 2],
             others: 0.0,
         };
         let order = if rep % 2 == 0 { [1, 2] } else { [2, 1] };
@@ -503,6 +468,7 @@ fn spin(o: &Opts) {
                 cpu_us: vec![0.0; 2],
                 wait: vec![0.0; 2],
                 cores: vec![0.0; 2],
+                sleeps: vec![0.0; 2],
                 others: 0.0,
             };
             let order = if rep % 2 == 0 { [0, 1] } else { [1, 0] };
@@ -541,18 +507,21 @@ fn main() {
     let o = parse();
     if o.forkjoin {
         for rep in 0..o.repeats {
-            for work in [100, 1000] {
-                let before = sched::snapshot();
-                let start = Instant::now();
-                let one = forkjoin::overhead(1, work, 300);
-                let two = forkjoin::overhead(2, work, 300);
-                let others = sched::between(&before, &sched::snapshot()).others
-                    / start.elapsed().as_secs_f64();
-                println!(
-                    "  rep {rep} forkjoin work {work} us: overhead per call (median, p90) 1 thread \
-                     {:.0} {:.0} us, 2 threads {:.0} {:.0} us; others {others:.2} cores",
-                    one.0, one.1, two.0, two.1
-                );
+            for (work, gap) in [(100, 0), (1000, 0), (1000, 1700)] {
+                for caller in [false, true] {
+                    let before = sched::snapshot();
+                    let start = Instant::now();
+                    let one = forkjoin::overhead(1, work, gap, caller, 300);
+                    let two = forkjoin::overhead(2, work, gap, caller, 300);
+                    let others = sched::between(&before, &sched::snapshot()).others
+                        / start.elapsed().as_secs_f64();
+                    println!(
+                        "  rep {rep} forkjoin work {work} us gap {gap} us caller works {caller}: \
+                         overhead per call (median, p90) 1 thread {:.0} {:.0} us, 2 threads {:.0} \
+                         {:.0} us; others {others:.2} cores",
+                        one.0, one.1, two.0, two.1
+                    );
+                }
             }
         }
     } else if o.spin {

@@ -3,9 +3,10 @@
 //! machine's busy time (`/proc/stat`, steal included), so that a run can be labelled with how
 //! much of the 2 cores other processes (the other agents) took while it ran.
 
-/// A snapshot: per thread (tid, run ns, wait ns), and the machine's busy and total seconds.
+/// A snapshot: per thread (tid, run ns, wait ns, voluntary context switches), and the
+/// machine's busy seconds.
 pub struct Snapshot {
-    threads: Vec<(u64, u64, u64)>,
+    threads: Vec<(u64, u64, u64, u64)>,
     busy: f64,
 }
 
@@ -16,6 +17,9 @@ pub struct Usage {
     pub wait: f64,
     /// CPU seconds all other processes (and the hypervisor's steal) took.
     pub others: f64,
+    /// Times this process's threads went to sleep (blocked or parked: each one a wake-up
+    /// later); unlike times, a count the other processes' load does not change.
+    pub sleeps: u64,
 }
 
 pub fn snapshot() -> Snapshot {
@@ -26,7 +30,13 @@ pub fn snapshot() -> Snapshot {
         };
         if let Ok(s) = std::fs::read_to_string(e.path().join("schedstat")) {
             let mut f = s.split_whitespace().map(|v| v.parse::<u64>().unwrap_or(0));
-            threads.push((tid, f.next().unwrap_or(0), f.next().unwrap_or(0)));
+            let status = std::fs::read_to_string(e.path().join("status")).unwrap_or_default();
+            let voluntary = status
+                .lines()
+                .find_map(|l| l.strip_prefix("voluntary_ctxt_switches:"))
+                .and_then(|v| v.trim().parse().ok())
+                .unwrap_or(0);
+            threads.push((tid, f.next().unwrap_or(0), f.next().unwrap_or(0), voluntary));
         }
     }
     Snapshot {
@@ -51,11 +61,12 @@ fn machine_busy() -> f64 {
 
 /// Usage between two snapshots, over the threads present in both (pools come and go).
 pub fn between(a: &Snapshot, b: &Snapshot) -> Usage {
-    let (mut cpu, mut wait) = (0u64, 0u64);
-    for &(tid, run1, wait1) in &b.threads {
-        if let Some(&(_, run0, wait0)) = a.threads.iter().find(|t| t.0 == tid) {
+    let (mut cpu, mut wait, mut sleeps) = (0u64, 0u64, 0u64);
+    for &(tid, run1, wait1, vol1) in &b.threads {
+        if let Some(&(_, run0, wait0, vol0)) = a.threads.iter().find(|t| t.0 == tid) {
             cpu += run1 - run0;
             wait += wait1 - wait0;
+            sleeps += vol1 - vol0;
         }
     }
     let (cpu, wait) = (cpu as f64 * 1e-9, wait as f64 * 1e-9);
@@ -63,5 +74,6 @@ pub fn between(a: &Snapshot, b: &Snapshot) -> Usage {
         cpu,
         wait,
         others: (b.busy - a.busy - cpu).max(0.0),
+        sleeps,
     }
 }
