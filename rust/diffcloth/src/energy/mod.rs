@@ -12,6 +12,7 @@
 mod attachment;
 mod bend;
 mod bend_edge;
+mod polar;
 mod stretch;
 
 pub use attachment::Attachments;
