@@ -58,21 +58,26 @@ impl Anderson {
                 .iter_mut()
                 .zip(self.d_g[slot].iter_mut())
                 .zip(f.iter().zip(g))
-                .zip(self.f_prev.iter().zip(&self.g_prev))
+                .zip(self.f_prev.iter_mut().zip(self.g_prev.iter_mut()))
             {
-                *df = fi - fp;
-                *dg = gi - gp;
+                *df = fi - *fp;
+                *dg = gi - *gp;
+                (*fp, *gp) = (*fi, *gi);
             }
             self.columns = (self.columns + 1).min(self.history);
             self.next = (slot + 1) % self.history;
-            for j in 0..self.columns {
-                let dot = dot(&self.d_f[slot], &self.d_f[j]);
+            let m = self.columns;
+            let mut dots = [0.0; MAX_HISTORY];
+            let cols: [&[Vec3]; MAX_HISTORY] = std::array::from_fn(|j| &self.d_f[j.min(m - 1)][..]);
+            multi_dot(&self.d_f[slot], &cols[..m], &mut dots);
+            for (j, &dot) in dots.iter().enumerate().take(m) {
                 self.gram[slot][j] = dot;
                 self.gram[j][slot] = dot;
             }
+        } else {
+            self.f_prev.copy_from_slice(f);
+            self.g_prev.copy_from_slice(g);
         }
-        self.f_prev.copy_from_slice(f);
-        self.g_prev.copy_from_slice(g);
         self.has_prev = true;
     }
 
@@ -94,23 +99,69 @@ impl Anderson {
         for i in 0..m {
             a[i][..m].copy_from_slice(&self.gram[i][..m]);
             a[i][i] += reg;
-            theta[i] = dot(&self.d_f[i], f);
         }
+        let d_f: [&[Vec3]; MAX_HISTORY] = std::array::from_fn(|j| &self.d_f[j.min(m - 1)][..]);
+        multi_dot(f, &d_f[..m], &mut theta);
         if !cholesky_solve(&mut a, &mut theta, m) {
             return false;
         }
-        out.copy_from_slice(g);
-        for (j, &t) in theta.iter().enumerate().take(m) {
-            for (o, dg) in out.iter_mut().zip(&self.d_g[j]) {
-                *o -= t * dg;
-            }
-        }
+        let d_g: [&[Vec3]; MAX_HISTORY] = std::array::from_fn(|j| &self.d_g[j.min(m - 1)][..]);
+        sub_combination(g, &theta[..m], &d_g[..m], out);
         true
     }
 }
 
-fn dot(a: &[Vec3], b: &[Vec3]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x.dot(y)).sum()
+// The history's passes over the nodes, one pass for all columns: a dot product is a chain
+// of dependent additions (latency-bound, about 4 cycles a node), so `m` of them side by side
+// cost about what one does. Each sum still runs in node order, and each output subtracts the
+// columns in order: the same bits as one pass per column. `K` is a constant so the
+// accumulators live in registers.
+
+/// Calls `run::<K>(args)` with `K` the column count (1..=MAX_HISTORY).
+macro_rules! by_columns {
+    ($m:expr, $run:ident($($arg:expr),*)) => {
+        match $m {
+            1 => $run::<1>($($arg),*),
+            2 => $run::<2>($($arg),*),
+            3 => $run::<3>($($arg),*),
+            4 => $run::<4>($($arg),*),
+            5 => $run::<5>($($arg),*),
+            6 => $run::<6>($($arg),*),
+            7 => $run::<7>($($arg),*),
+            8 => $run::<8>($($arg),*),
+            m => unreachable!("{m} history columns"),
+        }
+    };
+}
+
+/// `out[j] = a . cols[j]` for every column.
+fn multi_dot(a: &[Vec3], cols: &[&[Vec3]], out: &mut [f64; MAX_HISTORY]) {
+    fn run<const K: usize>(a: &[Vec3], cols: &[&[Vec3]], out: &mut [f64; MAX_HISTORY]) {
+        let cols: [&[Vec3]; K] = std::array::from_fn(|k| &cols[k][..a.len()]);
+        let mut acc = [0.0; K];
+        for (i, ai) in a.iter().enumerate() {
+            for k in 0..K {
+                acc[k] += cols[k][i].dot(ai);
+            }
+        }
+        out[..K].copy_from_slice(&acc);
+    }
+    by_columns!(cols.len(), run(a, cols, out));
+}
+
+/// `out = g - sum_j theta_j cols[j]`.
+fn sub_combination(g: &[Vec3], theta: &[f64], cols: &[&[Vec3]], out: &mut [Vec3]) {
+    fn run<const K: usize>(g: &[Vec3], theta: &[f64], cols: &[&[Vec3]], out: &mut [Vec3]) {
+        let cols: [&[Vec3]; K] = std::array::from_fn(|k| &cols[k][..g.len()]);
+        for (i, (o, gi)) in out.iter_mut().zip(g).enumerate() {
+            let mut v = *gi;
+            for k in 0..K {
+                v -= theta[k] * cols[k][i];
+            }
+            *o = v;
+        }
+    }
+    by_columns!(cols.len(), run(g, theta, cols, out));
 }
 
 /// In-place Cholesky solve of the leading `m x m` block; false if not positive definite.

@@ -30,6 +30,9 @@ thread_local! {
     /// Step of the attachment-target difference (before `eps_factor`); a scene whose loss
     /// curves strongly in the targets sets a smaller one.
     pub(crate) static TARGETS_EPS: std::cell::Cell<f64> = const { std::cell::Cell::new(1e-4) };
+    /// Relative step of the k_stretch difference; a scene whose loss curves strongly in it
+    /// sets a smaller one.
+    pub(crate) static K_STRETCH_EPS: std::cell::Cell<f64> = const { std::cell::Cell::new(1e-4) };
 }
 
 pub(crate) fn run(sim: &mut Simulator, r: &Rollout, loss: &Loss, record: bool) -> f64 {
@@ -256,7 +259,9 @@ pub(crate) fn check_all_gradients(
     check(
         "k_stretch",
         g.k_stretch * ks,
-        fd(1e-4, &|r, e| r.params.k_stretch += e * ks),
+        fd(K_STRETCH_EPS.with(|e| e.get()), &|r, e| {
+            r.params.k_stretch += e * ks
+        }),
     );
     if effects.bend {
         check(

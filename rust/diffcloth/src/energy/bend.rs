@@ -120,6 +120,8 @@ impl Bend {
         self.project_one(i, x).0
     }
 
+    // Inlined into the local step's loop (a call per constraint returns through memory).
+    #[inline(always)]
     fn project_one(&self, i: usize, x: &[Vec3]) -> (Vec3, f64) {
         let (target, fallback) = (self.rest_length[i], self.rest_vector[i]);
         rescale_to_rest_length(self.curvature(i, x), target, fallback, self.weight[i])

@@ -134,6 +134,7 @@ impl BendEdge {
     }
 
     /// `A_i x = sum_j w_j x_j`.
+    #[inline]
     pub fn edge_vector(&self, i: usize, x: &[Vec3]) -> Vec3 {
         let (n, c) = (&self.nodes[i], &self.coef[i]);
         c[0] * x[n[0]] + c[1] * x[n[1]] + c[2] * x[n[2]] + c[3] * x[n[3]]
@@ -144,6 +145,8 @@ impl BendEdge {
         self.project_one(i, x).0
     }
 
+    // Inlined into the local step's loop (a call per constraint returns through memory).
+    #[inline(always)]
     fn project_one(&self, i: usize, x: &[Vec3]) -> (Vec3, f64) {
         let (target, fallback) = (self.rest_length[i], self.rest_vector[i]);
         rescale_to_rest_length(self.edge_vector(i, x), target, fallback, self.weight[i])

@@ -12,6 +12,7 @@
 mod attachment;
 mod bend;
 mod bend_edge;
+mod polar;
 mod stretch;
 
 pub use attachment::Attachments;
@@ -108,20 +109,21 @@ pub(crate) fn project_vec3_each(
 ) -> f64 {
     let work = |(i, (p, e)): (usize, (&mut [f64], &mut f64))| {
         let (projection, energy) = project_one(i);
-        p.copy_from_slice(projection.as_slice());
+        // Element-wise: `copy_from_slice` on a chunk of unknown length calls memcpy.
+        (p[0], p[1], p[2]) = (projection.x, projection.y, projection.z);
         *e = energy;
     };
     let Projections { values, energy } = out;
     if parallel && energy.len() >= PARALLEL_MIN_CONSTRAINTS {
         use rayon::prelude::*;
         values
-            .par_chunks_mut(3)
+            .par_chunks_exact_mut(3)
             .zip(energy.par_iter_mut())
             .enumerate()
             .for_each(work);
     } else {
         values
-            .chunks_mut(3)
+            .chunks_exact_mut(3)
             .zip(energy.iter_mut())
             .enumerate()
             .for_each(work);
@@ -132,6 +134,7 @@ pub(crate) fn project_vec3_each(
 /// The bending models' projection: `v` rescaled to its rest length `target` (`0` on a flat
 /// rest shape; `fallback`, the rest vector, when `v` vanishes exactly), and the energy
 /// `w / 2 |v - p|^2`.
+#[inline(always)]
 pub(crate) fn rescale_to_rest_length(v: Vec3, target: f64, fallback: Vec3, w: f64) -> (Vec3, f64) {
     let len = v.norm();
     let p = if target == 0.0 {

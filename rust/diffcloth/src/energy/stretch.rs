@@ -4,13 +4,15 @@
 //! triangle's own 2D frame. The projection is `U clamp(Sigma, s_min, s_max) V^T`
 //! (as-rigid-as-possible for `s_min = s_max = 1`), and `w_i = k_stretch * rest area`.
 
+use super::polar::{
+    lane, project_rigid_group, project_singular_values, project_singular_values_lanes,
+    projection_jacobian, set_lane, singular_2d, Group, Mat32, LANES,
+};
 use super::{PdConstraints, Projections, Stiffness, PARALLEL_MIN_CONSTRAINTS};
 use crate::mesh::TriMesh;
 use crate::Vec3;
-use nalgebra::{Matrix2, Matrix3, Matrix3x2, Vector2};
+use nalgebra::{Matrix2, Matrix3, Vector2};
 use rayon::prelude::*;
-
-pub type Mat32 = Matrix3x2<f64>;
 
 #[derive(Debug, Clone)]
 pub struct Stretch {
@@ -78,6 +80,58 @@ impl Stretch {
         f
     }
 
+    /// Deformation gradients of triangles `base..base + n` (`n <= LANES`; the other lanes
+    /// zero), each as [`Stretch::deformation_gradient`] computes it.
+    fn deformation_gradients(&self, base: usize, n: usize, x: &[Vec3]) -> Group {
+        let mut f: Group = [[0.0; LANES]; 6];
+        let tris = self.triangles[base..base + n]
+            .iter()
+            .zip(&self.shape[base..base + n]);
+        for (l, (tri, b)) in tris.enumerate() {
+            let [p0, p1, p2] = tri.map(|i| x[i]);
+            for k in 0..2 {
+                for r in 0..3 {
+                    f[3 * k + r][l] = p0[r] * b[0][k] + p1[r] * b[1][k] + p2[r] * b[2][k];
+                }
+            }
+        }
+        f
+    }
+
+    /// Projects one group of triangles (`base..base + n`) at `x` into `p` (6 floats each,
+    /// column-major) and their energies into `e`.
+    fn project_group(&self, base: usize, x: &[Vec3], p: &mut [f64], e: &mut [f64]) {
+        let (lo, hi) = (self.strain_min, self.strain_max);
+        let n = e.len();
+        let f = self.deformation_gradients(base, n, x);
+        let mut q: Group = [[0.0; LANES]; 6];
+        if lo == hi {
+            let regular = project_rigid_group(&f, lo, &mut q);
+            for l in (0..n).filter(|&l| !regular[l]) {
+                set_lane(&mut q, l, &project_singular_values(&lane(&f, l), lo, hi));
+            }
+        } else {
+            let projected =
+                project_singular_values_lanes(&std::array::from_fn(|l| lane(&f, l)), lo, hi);
+            for (l, m) in projected.iter().enumerate() {
+                set_lane(&mut q, l, m);
+            }
+        }
+        let mut sq = [0.0; LANES];
+        for k in 0..6 {
+            for l in 0..LANES {
+                let r = f[k][l] - q[k][l];
+                sq[l] += r * r;
+            }
+        }
+        for l in 0..n {
+            for k in 0..6 {
+                p[6 * l + k] = q[k][l];
+            }
+            e[l] = 0.5 * self.weight[base + l] * sq[l];
+        }
+    }
+
     /// Singular values of every triangle's deformation gradient at `x` (principal stretches).
     pub fn principal_stretches(&self, x: &[Vec3]) -> Vec<(f64, f64)> {
         (0..self.len())
@@ -105,20 +159,8 @@ impl PdConstraints for Stretch {
     }
 
     fn project(&self, x: &[Vec3], parallel: bool, out: &mut Projections) -> f64 {
-        let (lo, hi) = (self.strain_min, self.strain_max);
-        // Triangles go in groups of LANES: their independent sqrt/div chains overlap and
-        // vectorize, instead of one latency-bound chain after another.
         let work = |(group, (p, e)): (usize, (&mut [f64], &mut [f64]))| {
-            let base = group * LANES;
-            let mut f = [Mat32::zeros(); LANES];
-            for (l, fl) in f.iter_mut().enumerate().take(e.len()) {
-                *fl = self.deformation_gradient(base + l, x);
-            }
-            let projected = project_singular_values_lanes(&f, lo, hi);
-            for l in 0..e.len() {
-                p[6 * l..6 * l + 6].copy_from_slice(projected[l].as_slice());
-                e[l] = 0.5 * self.weight[base + l] * (f[l] - projected[l]).norm_squared();
-            }
+            self.project_group(group * LANES, x, p, e)
         };
         let Projections { values, energy } = out;
         if parallel && energy.len() >= PARALLEL_MIN_CONSTRAINTS {
@@ -256,160 +298,6 @@ impl PdConstraints for Stretch {
 /// Floats of one triangle's weighted projection Jacobian (6x6).
 const JACOBIAN_LEN: usize = 36;
 
-/// Singular values `s1 >= s2 >= 0` and right singular vectors of a 3x2 matrix, in closed form
-/// from the 2x2 eigenproblem of `F^T F = [[a, b], [b, c]]` (no trigonometry: this runs once per
-/// triangle per PD iteration).
-fn singular_2d(f: &Mat32) -> (f64, f64, Vector2<f64>, Vector2<f64>) {
-    let (c0, c1) = (f.column(0), f.column(1));
-    let (a, b, c) = (c0.dot(&c0), c0.dot(&c1), c1.dot(&c1));
-    let half_trace = 0.5 * (a + c);
-    let disc = (0.25 * (a - c) * (a - c) + b * b).sqrt();
-    let (l1, l2) = (half_trace + disc, (half_trace - disc).max(0.0));
-    // Eigenvector of l1: (l1 - c, b) or (b, l1 - a); take the better conditioned one.
-    let (p, q) = (Vector2::new(l1 - c, b), Vector2::new(b, l1 - a));
-    let v = if p.norm_squared() >= q.norm_squared() {
-        p
-    } else {
-        q
-    };
-    let norm = v.norm();
-    // An isotropic F^T F (norm = 0) has every direction as eigenvector.
-    let v1 = if norm > 1e-300 {
-        v / norm
-    } else {
-        Vector2::new(1.0, 0.0)
-    };
-    (l1.sqrt(), l2.sqrt(), v1, Vector2::new(-v1.y, v1.x))
-}
-
-/// Triangles projected together by [`project_singular_values_lanes`].
-const LANES: usize = 4;
-
-/// [`project_singular_values`] for `LANES` matrices at once, written lane by lane without
-/// branches so the compiler vectorizes it; rank-deficient lanes fall back to the scalar path.
-fn project_singular_values_lanes(f: &[Mat32; LANES], lo: f64, hi: f64) -> [Mat32; LANES] {
-    let mut out = [Mat32::zeros(); LANES];
-    let mut regular = [false; LANES];
-    let (mut r1, mut r2, mut v1x, mut v1y) =
-        ([0.0; LANES], [0.0; LANES], [0.0; LANES], [0.0; LANES]);
-    for l in 0..LANES {
-        let (c0, c1) = (f[l].column(0), f[l].column(1));
-        let (a, b, c) = (c0.dot(&c0), c0.dot(&c1), c1.dot(&c1));
-        let half_trace = 0.5 * (a + c);
-        let disc = (0.25 * (a - c) * (a - c) + b * b).sqrt();
-        let (l1, l2) = (half_trace + disc, (half_trace - disc).max(0.0));
-        let (px, py, qx, qy) = (l1 - c, b, b, l1 - a);
-        let take_p = px * px + py * py >= qx * qx + qy * qy;
-        let (vx, vy) = if take_p { (px, py) } else { (qx, qy) };
-        let norm2 = vx * vx + vy * vy;
-        let inv = if norm2 > 1e-300 {
-            1.0 / norm2.sqrt()
-        } else {
-            0.0
-        };
-        let isotropic = norm2 <= 1e-300;
-        v1x[l] = if isotropic { 1.0 } else { vx * inv };
-        v1y[l] = if isotropic { 0.0 } else { vy * inv };
-        let (s1, s2) = (l1.sqrt(), l2.sqrt());
-        regular[l] = s2 > 1e-8 * s1;
-        r1[l] = s1.clamp(lo, hi) / s1;
-        r2[l] = s2.clamp(lo, hi) / s2;
-    }
-    for l in 0..LANES {
-        if regular[l] {
-            let v1 = Vector2::new(v1x[l], v1y[l]);
-            out[l] = f[l] * r2[l] + (f[l] * v1) * ((r1[l] - r2[l]) * v1.transpose());
-        } else {
-            out[l] = project_singular_values(&f[l], lo, hi);
-        }
-    }
-    out
-}
-
-/// Closest matrix to `f` (Frobenius) whose singular values lie in `[lo, hi]`:
-/// `U clamp(Sigma, lo, hi) V^T`.
-pub fn project_singular_values(f: &Mat32, lo: f64, hi: f64) -> Mat32 {
-    let (s1, s2, v1, v2) = singular_2d(f);
-    let (t1, t2) = (s1.clamp(lo, hi), s2.clamp(lo, hi));
-    if s2 > 1e-8 * s1 {
-        // F V diag(t / s) V^T = U diag(t) V^T without forming U; with V = [v1 v2] orthonormal,
-        // V diag(r1, r2) V^T = r2 I + (r1 - r2) v1 v1^T.
-        let (r1, r2) = (t1 / s1, t2 / s2);
-        return f * r2 + (f * v1) * ((r1 - r2) * v1.transpose());
-    }
-    // Rank-deficient F (collapsed triangle): U's columns are not unique; complete them.
-    let u1 = if s1 > 0.0 { f * v1 / s1 } else { Vec3::x() };
-    let mut u2 = f * v2;
-    u2 -= u1 * u1.dot(&u2);
-    if u2.norm() <= 1e-12 * s1.max(1e-300) {
-        let axis = u1.iamin();
-        let mut e = Vec3::zeros();
-        e[axis] = 1.0;
-        u2 = e - u1 * u1[axis];
-    }
-    let u2 = u2.normalize();
-    t1 * u1 * v1.transpose() + t2 * u2 * v2.transpose()
-}
-
-/// Jacobian of [`project_singular_values`] with respect to F, as a 6x6 matrix acting on F
-/// flattened column by column (`[F[:,0]; F[:,1]]`). From the derivative of a singular-value
-/// function of a 3x2 matrix: in the frame `dF^ = U^T dF V` (U completed to 3x3),
-/// `dP^_ii = f'(s_i) dF^_ii`, the 2x2 off-diagonal block mixes the symmetric and
-/// antisymmetric parts with `(f1 - f2) / (s1 - s2)` and `(f1 + f2) / (s1 + s2)`, and the third
-/// row scales by `f_j / s_j`. Symmetric (a nearest-point projection).
-pub fn projection_jacobian(f: &Mat32, lo: f64, hi: f64) -> [[f64; 6]; 6] {
-    let (s1, s2, v1, v2) = singular_2d(f);
-    let tiny = 1e-12 * s1.max(1e-300);
-    let (s1c, s2c) = (s1.max(tiny), s2.max(tiny));
-    let u1 = f * v1 / s1c;
-    let mut u2 = f * v2;
-    u2 -= u1 * u1.dot(&u2);
-    let u2 = if u2.norm() > tiny {
-        u2.normalize()
-    } else {
-        complete(&u1)
-    };
-    let u3 = u1.cross(&u2);
-    let (f1, f2) = (s1.clamp(lo, hi), s2.clamp(lo, hi));
-    let slope = |s: f64| if s > lo && s < hi { 1.0 } else { 0.0 };
-    let (d1, d2) = (slope(s1), slope(s2));
-    let diff = if (s1 - s2).abs() > 1e-10 * s1.max(1e-300) {
-        (f1 - f2) / (s1 - s2)
-    } else {
-        0.5 * (d1 + d2)
-    };
-    let sum = (f1 + f2) / (s1c + s2c);
-    let u = nalgebra::Matrix3::from_columns(&[u1, u2, u3]);
-    let v = Matrix2::from_columns(&[v1, v2]);
-    let mut jac = [[0.0; 6]; 6];
-    for k in 0..6 {
-        let mut df = Mat32::zeros();
-        df[(k % 3, k / 3)] = 1.0;
-        let h = u.transpose() * df * v;
-        let mut dp = Mat32::zeros();
-        dp[(0, 0)] = d1 * h[(0, 0)];
-        dp[(1, 1)] = d2 * h[(1, 1)];
-        let (a, b) = (h[(0, 1)], h[(1, 0)]);
-        dp[(0, 1)] = 0.5 * sum * (a - b) + 0.5 * diff * (a + b);
-        dp[(1, 0)] = -0.5 * sum * (a - b) + 0.5 * diff * (a + b);
-        dp[(2, 0)] = f1 / s1c * h[(2, 0)];
-        dp[(2, 1)] = f2 / s2c * h[(2, 1)];
-        let out = u * dp * v.transpose();
-        for r in 0..6 {
-            jac[r][k] = out[(r % 3, r / 3)];
-        }
-    }
-    jac
-}
-
-/// A unit vector orthogonal to `u`.
-fn complete(u: &Vec3) -> Vec3 {
-    let axis = u.iamin();
-    let mut e = Vec3::zeros();
-    e[axis] = 1.0;
-    (e - u * u[axis]).normalize()
-}
-
 impl Stretch {
     pub fn triangles(&self) -> &[[usize; 3]] {
         &self.triangles
@@ -438,99 +326,6 @@ mod tests {
     use super::*;
     use crate::energy::testing::*;
     use crate::mesh::{grid, GridPlane};
-
-    #[test]
-    fn projection_jacobian_matches_finite_differences() {
-        for (seed, (lo, hi)) in (0..40).zip([(1.0, 1.0), (0.9, 1.1), (0.95, 1.3)].iter().cycle()) {
-            let f = random_f(seed);
-            let jac = projection_jacobian(&f, *lo, *hi);
-            let eps = 1e-6;
-            for k in 0..6 {
-                let mut df = Mat32::zeros();
-                df[(k % 3, k / 3)] = eps;
-                let fd = (project_singular_values(&(f + df), *lo, *hi)
-                    - project_singular_values(&(f - df), *lo, *hi))
-                    / (2.0 * eps);
-                for r in 0..6 {
-                    assert!(
-                        (fd[(r % 3, r / 3)] - jac[r][k]).abs() < 1e-6,
-                        "seed {seed} [{r}][{k}]: {} vs {}",
-                        jac[r][k],
-                        fd[(r % 3, r / 3)]
-                    );
-                }
-            }
-            for r in 0..6 {
-                for k in 0..6 {
-                    assert!((jac[r][k] - jac[k][r]).abs() < 1e-10, "symmetric");
-                }
-            }
-        }
-    }
-
-    fn random_f(seed: u64) -> Mat32 {
-        let v = jitter(&[Vec3::zeros(), Vec3::zeros()], 1.5, seed);
-        Mat32::from_columns(&[v[0], v[1]])
-    }
-
-    #[test]
-    fn projection_matches_svd_and_is_closest() {
-        for seed in 0..200 {
-            let f = random_f(seed);
-            let p = project_singular_values(&f, 0.9, 1.1);
-            let svd = f.svd(true, true);
-            let clamped = svd.singular_values.map(|s| s.clamp(0.9, 1.1));
-            let expected = svd.u.unwrap() * Matrix2::from_diagonal(&clamped) * svd.v_t.unwrap();
-            assert!(
-                (p - expected).norm() < 1e-10 * (1.0 + f.norm()),
-                "seed {seed}"
-            );
-            // Its singular values are inside the limits ...
-            let sv = p.svd(false, false).singular_values;
-            assert!(sv.iter().all(|&s| (0.9 - 1e-12..=1.1 + 1e-12).contains(&s)));
-            // ... and no other member of the set we sample is closer.
-            for k in 0..20 {
-                let q = random_f(1000 + 20 * seed + k);
-                let qs = q.svd(true, true);
-                let member = qs.u.unwrap()
-                    * Matrix2::from_diagonal(&qs.singular_values.map(|s| s.clamp(0.9, 1.1)))
-                    * qs.v_t.unwrap();
-                assert!((f - p).norm() <= (f - member).norm() + 1e-12);
-            }
-        }
-    }
-
-    #[test]
-    fn lane_projection_matches_the_scalar_one() {
-        for seed in 0..50 {
-            let mut f = [0; LANES].map(|_| Mat32::zeros());
-            for (l, fl) in f.iter_mut().enumerate() {
-                *fl = random_f(7 * seed + l as u64);
-            }
-            // A collapsed lane and a zero lane take the fallback path.
-            f[1] = Mat32::from_columns(&[Vec3::new(1.0, 2.0, 0.0), Vec3::new(2.0, 4.0, 0.0)]);
-            f[2] = Mat32::zeros();
-            let lanes = project_singular_values_lanes(&f, 0.9, 1.1);
-            for l in 0..LANES {
-                let scalar = project_singular_values(&f[l], 0.9, 1.1);
-                assert!(
-                    (lanes[l] - scalar).norm() < 1e-12 * (1.0 + scalar.norm()),
-                    "seed {seed} lane {l}"
-                );
-            }
-        }
-    }
-
-    #[test]
-    fn projection_handles_collapsed_triangles() {
-        let f = Mat32::from_columns(&[Vec3::new(1.0, 2.0, 0.0), Vec3::new(2.0, 4.0, 0.0)]);
-        let p = project_singular_values(&f, 1.0, 1.0);
-        assert!(p.iter().all(|v| v.is_finite()));
-        let sv = p.svd(false, false).singular_values;
-        assert!((sv[0] - 1.0).abs() < 1e-12 && (sv[1] - 1.0).abs() < 1e-12);
-        let p0 = project_singular_values(&Mat32::zeros(), 1.0, 1.0);
-        assert!((p0.transpose() * p0 - Matrix2::identity()).norm() < 1e-12);
-    }
 
     #[test]
     fn rest_shape_has_identity_stretch_and_zero_energy() {
