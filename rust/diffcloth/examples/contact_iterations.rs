@@ -22,8 +22,16 @@ fn config(scene: &str) -> SceneConfig {
         return SceneConfig::from_toml_str(&text).unwrap();
     }
     let name = scene.split(':').next().unwrap();
-    let name = if name == "hatdown" { "hat" } else { name };
-    SceneConfig::from_toml_file(&dir.join(format!("{name}.toml"))).unwrap()
+    let name = if name.starts_with("hatdown") {
+        "hat"
+    } else {
+        name
+    };
+    let mut cfg = SceneConfig::from_toml_file(&dir.join(format!("{name}.toml"))).unwrap();
+    if scene.starts_with("hatdown_inertia") {
+        cfg.contact.as_mut().unwrap().response = diffcloth::config::ContactResponse::Inertia;
+    }
+    cfg
 }
 
 fn main() {
@@ -41,7 +49,10 @@ fn main() {
         vec![Polish::None, Polish::Semismooth]
     };
     let cfg = config(scene);
-    let lower: Option<f64> = scene.strip_prefix("hatdown:").map(|d| d.parse().unwrap());
+    let lower: Option<f64> = scene
+        .strip_prefix("hatdown:")
+        .or(scene.strip_prefix("hatdown_inertia:"))
+        .map(|d| d.parse().unwrap());
     let mut first: Option<Vec<diffcloth::Vec3>> = None;
     let mut states: Vec<(Vec<diffcloth::Vec3>, Vec<diffcloth::Vec3>, f64)> = Vec::new();
     let one_step = std::env::var("ONE_STEP").is_ok();
@@ -59,6 +70,9 @@ fn main() {
         let (mut c_steps, mut c_it, mut f_steps, mut f_it, mut unconv) = (0, 0, 0, 0, 0);
         let (mut c_time, mut f_time) = (0.0, 0.0);
         let record = first.is_none();
+        sim.set_trace(true);
+        // Contact steps' iterations with the update above 1e-4 (before contact Newton starts).
+        let mut above = 0;
         let mut one_step_diff: f64 = 0.0;
         for k in 0..steps {
             if record {
@@ -93,6 +107,7 @@ fn main() {
             }
             unconv += usize::from(!st.converged);
             if st.contacts.stick + st.contacts.slip > 0 {
+                above += sim.trace().unwrap().iter().filter(|t| t.1 > 1e-4).count();
                 (c_steps, c_it, c_time) = (c_steps + 1, c_it + st.iterations, c_time + dt);
             } else {
                 (f_steps, f_it, f_time) = (f_steps + 1, f_it + st.iterations, f_time + dt);
@@ -116,19 +131,25 @@ fn main() {
         println!(
             "{scene} nodes {} tol {tol:e} polish {:<10} contact steps {c_steps}: {:.1} it/step \
              {:.2} ms/step | free steps {f_steps}: {:.1} it/step {:.2} ms/step | unconverged \
-             {unconv} | cnewton {} ok {} rej {} gmres {} factors | tr-newton {} | max|dx| vs first {diff:.2e} \
-             one-step {one_step_diff:.2e}",
+             {unconv} | contact-step iterations above 1e-4 {:.1} | cnewton {} ok {} rej {} gmres {} factors | tr-newton {} | max|dx| vs first {diff:.2e} \
+             one-step {one_step_diff:.2e} | contact solve {:.0} % of the time, {:.1} contacts \
+             ({:.1} stick, {:.1} slip) per step",
             sim.num_nodes(),
             polish.name(),
             per(c_it as f64, c_steps),
             per(1e3 * c_time, c_steps),
             per(f_it as f64, f_steps),
             per(1e3 * f_time, f_steps),
+            per(above as f64, c_steps),
             p.contact_newton_steps,
             p.contact_newton_rejections,
             p.contact_newton_krylov_iterations,
             p.contact_newton_factorizations,
             p.newton_steps,
+            100.0 * p.contact_solve.as_secs_f64() / p.total.as_secs_f64(),
+            (p.contacts_take_off + p.contacts_stick + p.contacts_slip) as f64 / steps as f64,
+            p.contacts_stick as f64 / steps as f64,
+            p.contacts_slip as f64 / steps as f64,
         );
     }
 }

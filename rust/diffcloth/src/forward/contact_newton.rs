@@ -15,11 +15,12 @@
 //! out; `StepHessian::factor_constrained`), so right-preconditioned GMRES only sees friction
 //! and contacts between cloth nodes (and nodes in several contacts).
 //!
-//! Safeguards: tried once the PD update is below [`START`]; the trial `x + d` is evaluated as
-//! any iterate (local step, contact response, global step: the same stopping measure) and kept
-//! only if its PD update is smaller. A rejection sends the step back to PD until its update has
-//! fallen by another [`RETRY`]; an indefinite `Q H Q` (a saddle) ends the Newton steps of the
-//! step. The fixed point is unchanged: only the path to it. Sequential and deterministic.
+//! Safeguards: tried once the PD update is below [`START`]; the trial `x + a d` (`a` = 1, 1/2,
+//! 1/4) is evaluated as any iterate (local step, contact response, global step: the same
+//! stopping measure) and kept only if its PD update is smaller. A rejected step, or an
+//! indefinite `Q H Q` (a saddle), sends the step back to PD until its update has fallen by
+//! another [`RETRY`]. The fixed point is unchanged: only the path to it. Sequential and
+//! deterministic (the factor is reused within a step only, by iteration counts).
 
 use super::pd::Buffer;
 use super::safeguards::Progress;
@@ -34,8 +35,10 @@ use std::time::Instant;
 
 /// Try contact Newton once the RMS PD update (metres) is below this.
 pub(super) const START: f64 = 1e-4;
+/// Halvings of a rejected step before it is given up.
+const MAX_HALVINGS: usize = 2;
 /// After a rejected trial, retry once the update has fallen by this factor.
-const RETRY: f64 = 0.1;
+const RETRY: f64 = 0.5;
 /// GMRES iterations per Newton step, and its relative residual target.
 const MAX_KRYLOV: usize = 40;
 const FORCING: f64 = 1e-4;
@@ -168,22 +171,29 @@ impl Simulator {
         let direction = self.contact_newton_direction();
         self.profile.newton += start.elapsed();
         if !direction {
-            p.contact_newton_below = 0.0;
+            // (An indefinite Q H Q far from the solution can turn definite nearer to it.)
+            p.contact_newton_below = RETRY * p.residual;
             return false;
         }
-        let w = &mut self.work;
-        for ((e, x), d) in w
-            .extrapolated
-            .iter_mut()
-            .zip(&w.iterate)
-            .zip(&w.contact_newton.d)
-        {
-            *e = x + d;
-        }
-        let energy = self.local_step(Buffer::Extrapolated);
-        if self.evaluate_trial(p, energy, false) {
-            self.profile.contact_newton_steps += 1;
-            return true;
+        // Backtracking: the elastic energy's curvature changes along the step (the Hat's
+        // bending is not convex), so a full step can overshoot where a shorter one gains.
+        let mut scale = 1.0;
+        for _ in 0..=MAX_HALVINGS {
+            let w = &mut self.work;
+            for ((e, x), d) in w
+                .extrapolated
+                .iter_mut()
+                .zip(&w.iterate)
+                .zip(&w.contact_newton.d)
+            {
+                *e = x + scale * d;
+            }
+            let energy = self.local_step(Buffer::Extrapolated);
+            if self.evaluate_trial(p, energy, false) {
+                self.profile.contact_newton_steps += 1;
+                return true;
+            }
+            scale *= 0.5;
         }
         self.profile.contact_newton_rejections += 1;
         self.restore_update();
