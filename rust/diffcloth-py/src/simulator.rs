@@ -229,7 +229,9 @@ impl PySimulator {
                         s.acceleration = a;
                     }
                     "polish" => {
-                        let a: String = value.extract().map_err(|_| bad("\"newton\" or \"none\""))?;
+                        let a: String = value
+                            .extract()
+                            .map_err(|_| bad("\"newton\", \"semismooth\" or \"none\""))?;
                         s.polish = Polish::from_name(&a)
                             .ok_or_else(|| bad("\"newton\", \"semismooth\" or \"none\""))?;
                     }

@@ -9,7 +9,7 @@
 //! With `ONE_STEP=1`, every step of the later polishes also starts from the first polish's
 //! state: `one-step max|dx|` is then the difference of single steps (same start, same
 //! tolerance), which separates the solvers' fixed points from the rollout's sensitivity.
-use diffcloth::{Polish, SceneConfig, Simulator, SolverSettings, StepInput};
+use diffcloth::{Polish, SceneConfig, Simulator, SolverSettings, StepInput, Vec3};
 use std::time::Instant;
 
 fn config(scene: &str) -> SceneConfig {
@@ -53,8 +53,8 @@ fn main() {
         .strip_prefix("hatdown:")
         .or(scene.strip_prefix("hatdown_inertia:"))
         .map(|d| d.parse().unwrap());
-    let mut first: Option<Vec<diffcloth::Vec3>> = None;
-    let mut states: Vec<(Vec<diffcloth::Vec3>, Vec<diffcloth::Vec3>, f64)> = Vec::new();
+    let mut first: Option<Vec<Vec3>> = None;
+    let mut states: Vec<(Vec<Vec3>, Vec<Vec3>, f64)> = Vec::new();
     let one_step = std::env::var("ONE_STEP").is_ok();
     for polish in polishes {
         let mut sim = Simulator::new(&cfg).unwrap();
@@ -70,10 +70,11 @@ fn main() {
         let (mut c_steps, mut c_it, mut f_steps, mut f_it, mut unconv) = (0, 0, 0, 0, 0);
         let (mut c_time, mut f_time) = (0.0, 0.0);
         let record = first.is_none();
+        let t0 = sim.attachment_targets().to_vec();
         sim.set_trace(true);
         // Contact steps' iterations with the update above 1e-4 (before contact Newton starts).
         let mut above = 0;
-        let mut one_step_diff: f64 = 0.0;
+        let (mut one_step_diff, mut unconverged_diff): (f64, f64) = (0.0, 0.0);
         for k in 0..steps {
             if record {
                 let time = k as f64 * sim.params().h;
@@ -83,9 +84,11 @@ fn main() {
                 sim.reset(Some(x), Some(v)).unwrap();
                 sim.set_time(*t).unwrap();
             }
-            let mut targets = sim.attachment_targets().to_vec();
-            if let Some(d) = lower.filter(|_| k < 60) {
-                targets.iter_mut().for_each(|t| t.y -= d);
+            // Targets from the step index (a reset puts them back at rest).
+            let mut targets = t0.clone();
+            if let Some(d) = lower {
+                let drop = d * (k + 1).min(60) as f64;
+                targets.iter_mut().for_each(|t| t.y -= drop);
             }
             let input = StepInput {
                 attachment_targets: lower.map(|_| &targets[..]),
@@ -95,7 +98,13 @@ fn main() {
             let st = sim.step(input).unwrap();
             let dt = t.elapsed().as_secs_f64();
             if record {
-                states.push((sim.positions().to_vec(), Vec::new(), 0.0));
+                // (The velocity slot marks whether the first polish converged this step.)
+                let flag = if st.converged {
+                    Vec::new()
+                } else {
+                    vec![Vec3::zeros()]
+                };
+                states.push((sim.positions().to_vec(), flag, 0.0));
             } else if one_step {
                 let x0 = &states[2 * k + 1].0;
                 let d = x0
@@ -103,7 +112,14 @@ fn main() {
                     .zip(sim.positions())
                     .map(|(a, b)| (a - b).amax())
                     .fold(0.0, f64::max);
-                one_step_diff = one_step_diff.max(d);
+                if d > 1e-6 && std::env::var("SHOW").is_ok() {
+                    println!("  step {k}: one-step |dx| {d:.2e} ({st:?})");
+                }
+                if states[2 * k + 1].1.is_empty() && st.converged {
+                    one_step_diff = one_step_diff.max(d);
+                } else {
+                    unconverged_diff = unconverged_diff.max(d);
+                }
             }
             unconv += usize::from(!st.converged);
             if st.contacts.stick + st.contacts.slip > 0 {
@@ -132,7 +148,7 @@ fn main() {
             "{scene} nodes {} tol {tol:e} polish {:<10} contact steps {c_steps}: {:.1} it/step \
              {:.2} ms/step | free steps {f_steps}: {:.1} it/step {:.2} ms/step | unconverged \
              {unconv} | contact-step iterations above 1e-4 {:.1} | cnewton {} ok {} rej {} gmres {} factors | tr-newton {} | max|dx| vs first {diff:.2e} \
-             one-step {one_step_diff:.2e} | contact solve {:.0} % of the time, {:.1} contacts \
+             one-step {one_step_diff:.2e} (steps either left unconverged: {unconverged_diff:.2e}) | contact solve {:.0} % of the time, {:.1} contacts \
              ({:.1} stick, {:.1} slip) per step",
             sim.num_nodes(),
             polish.name(),
