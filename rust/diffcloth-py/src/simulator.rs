@@ -229,8 +229,11 @@ impl PySimulator {
                         s.acceleration = a;
                     }
                     "polish" => {
-                        let a: String = value.extract().map_err(|_| bad("\"newton\" or \"none\""))?;
-                        s.polish = Polish::from_name(&a).ok_or_else(|| bad("\"newton\" or \"none\""))?;
+                        let a: String = value
+                            .extract()
+                            .map_err(|_| bad("\"newton\", \"semismooth\" or \"none\""))?;
+                        s.polish = Polish::from_name(&a)
+                            .ok_or_else(|| bad("\"newton\", \"semismooth\" or \"none\""))?;
                     }
                     other => {
                         return Err(ParameterError::new_err(format!(

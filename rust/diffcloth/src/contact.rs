@@ -127,6 +127,11 @@ impl ContactSet {
         self.contacts.iter().all(|c| c.branch == Branch::TakeOff)
     }
 
+    /// A contact node's velocity after the last [`ContactSet::solve`] (every impulse applied).
+    pub(crate) fn solved_velocity(&self, node: usize) -> Vec3 {
+        self.velocity[node]
+    }
+
     pub fn counts(&self) -> BranchCounts {
         let mut c = BranchCounts::default();
         for k in &self.contacts {

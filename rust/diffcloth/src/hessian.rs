@@ -19,6 +19,7 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
+use nalgebra::Matrix3;
 use std::sync::Arc;
 
 /// Where one 3x3 block lives in the (both-triangle, column-major) value array: entry `(r, s)`
@@ -55,6 +56,8 @@ pub(crate) struct StepHessian {
     stack: MemBuffer,
     /// A right-hand side / solution as one 3m column.
     column: Vec<f64>,
+    /// Per node: its index in the constraints of `factor_constrained` (u32::MAX: none).
+    constrained: Vec<u32>,
 }
 
 impl HessianPattern {
@@ -146,6 +149,7 @@ impl StepHessian {
             values: vec![0.0; pattern.row_idx.len()],
             column: vec![0.0; pattern.col_ptr.len() - 1],
             factored: false,
+            constrained: Vec::new(),
             stack,
             pattern,
         }
@@ -159,6 +163,64 @@ impl StepHessian {
     /// Assembles `H = P (x) I_3 - dP` from a linearization and factors it; false (and no
     /// usable factor) if it is not numerically positive definite.
     pub(crate) fn factor(&mut self, model: &Model, lin: &[Vec<f64>]) -> bool {
+        self.assemble(model, lin);
+        self.factorize()
+    }
+
+    /// Factors `Q H Q + sum_j w_j Pi_j` instead: per constrained node `(j, Pi_j, w_j)` the
+    /// projector `Pi_j` onto its constrained directions (`Q = I - Pi` per node, identity
+    /// elsewhere) and a weight. The constrained directions decouple from the rest, which is
+    /// how the contact Newton eliminates stick and normal directions (`contact_newton.rs`).
+    /// Each node at most once.
+    pub(crate) fn factor_constrained(
+        &mut self,
+        model: &Model,
+        lin: &[Vec<f64>],
+        constraints: &[(usize, Matrix3<f64>, f64)],
+    ) -> bool {
+        self.assemble(model, lin);
+        let m = self.column.len() / 3;
+        if self.constrained.len() != m {
+            self.constrained = vec![u32::MAX; m];
+        }
+        for (k, &(j, _, _)) in constraints.iter().enumerate() {
+            self.constrained[j] = k as u32;
+        }
+        let pattern = &*self.pattern;
+        let q = |k: u32| match k {
+            u32::MAX => Matrix3::identity(),
+            k => Matrix3::identity() - constraints[k as usize].1,
+        };
+        for b in 0..m {
+            let (start, end) = (pattern.col_ptr[3 * b], pattern.col_ptr[3 * b + 1]);
+            let stride = end - start;
+            for pos in 0..stride / 3 {
+                let a = pattern.row_idx[start + 3 * pos] / 3;
+                let (ka, kb) = (self.constrained[a], self.constrained[b]);
+                if ka == u32::MAX && kb == u32::MAX {
+                    continue;
+                }
+                let base = start + 3 * pos;
+                let block = Matrix3::from_fn(|r, c| self.values[base + c * stride + r]);
+                let mut block = q(ka) * block * q(kb);
+                if a == b {
+                    let (_, pi, w) = constraints[ka as usize];
+                    block += w * pi;
+                }
+                for c in 0..3 {
+                    for r in 0..3 {
+                        self.values[base + c * stride + r] = block[(r, c)];
+                    }
+                }
+            }
+        }
+        for &(j, _, _) in constraints {
+            self.constrained[j] = u32::MAX;
+        }
+        self.factorize()
+    }
+
+    fn assemble(&mut self, model: &Model, lin: &[Vec<f64>]) {
         let pattern = &*self.pattern;
         let values = &mut self.values;
         values.iter_mut().for_each(|v| *v = 0.0);
@@ -181,6 +243,10 @@ impl StepHessian {
                 }
             });
         }
+    }
+
+    fn factorize(&mut self) -> bool {
+        let pattern = &*self.pattern;
         let n = self.column.len();
         let csc =
             SymbolicSparseColMatRef::new_checked(n, n, &pattern.col_ptr, None, &pattern.row_idx);

@@ -18,6 +18,7 @@ pub mod energy;
 pub mod error;
 pub mod forces;
 pub mod forward;
+pub(crate) mod gmres;
 pub(crate) mod hessian;
 pub mod linalg;
 pub mod mesh;

@@ -24,6 +24,12 @@ pub struct Profile {
     pub newton_rejections: u64,
     pub newton_cg_iterations: u64,
     pub newton: Duration,
+    /// Semi-smooth contact Newton (`solver.polish = "semismooth"`): accepted steps, rejected
+    /// trials and their GMRES iterations (its time is in `newton`).
+    pub contact_newton_steps: u64,
+    pub contact_newton_rejections: u64,
+    pub contact_newton_krylov_iterations: u64,
+    pub contact_newton_factorizations: u64,
     /// Local step: projections onto each constraint set and the right-hand side gather.
     pub local: Duration,
     /// Global step: the prefactored sparse solve.
@@ -66,6 +72,19 @@ impl Profile {
             ("newton_rejections", self.newton_rejections as f64),
             ("newton_cg_iterations", self.newton_cg_iterations as f64),
             ("newton_s", self.newton.as_secs_f64()),
+            ("contact_newton_steps", self.contact_newton_steps as f64),
+            (
+                "contact_newton_rejections",
+                self.contact_newton_rejections as f64,
+            ),
+            (
+                "contact_newton_krylov_iterations",
+                self.contact_newton_krylov_iterations as f64,
+            ),
+            (
+                "contact_newton_factorizations",
+                self.contact_newton_factorizations as f64,
+            ),
             ("refactorizations", self.refactorizations as f64),
             ("redetections", self.redetections as f64),
             ("local_s", self.local.as_secs_f64()),

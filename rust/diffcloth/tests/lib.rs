@@ -5,6 +5,7 @@ mod cancel_backward;
 mod common;
 mod contact;
 mod contact_gradients;
+mod contact_newton;
 mod contact_response;
 mod factored_adjoint;
 mod folded_cloth;

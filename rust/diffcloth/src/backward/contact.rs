@@ -12,13 +12,13 @@ use nalgebra::Matrix3;
 /// momentum form). The contact's free momentum is `d = sum_k s_k D_k - m v_obs` with
 /// `D = M v_n + h f + h (b(x) - K x)` per node, its impulse `J = Phi(d; n, gap, mu)` acts as
 /// the force `e_k J / h` on its nodes, so `dR/dx = sum_c E_c Phi' S_c (dP - K)`.
-pub(super) struct ContactLin {
+pub(crate) struct ContactLin {
     /// `(node, s_k)`: how the nodes' momenta combine into d.
-    pub(super) s: Vec<(usize, f64)>,
+    pub(crate) s: Vec<(usize, f64)>,
     /// `(node, e_k)`: where the impulse acts (+1 on the node / on a, -1 on b).
-    pub(super) e: Vec<(usize, f64)>,
+    pub(crate) e: Vec<(usize, f64)>,
     /// `dJ/dd`.
-    pub(super) phi: Matrix3<f64>,
+    pub(crate) phi: Matrix3<f64>,
     /// `dJ/dlambda` with `lambda = -(d.n + m gap / h)` the normal impulse.
     pub(super) dj_dlambda: Vec3,
     /// `dJ/dn` (the frame's dependence on x_n) and `dJ/dmu`.
@@ -42,17 +42,32 @@ impl ContactLin {
 /// Linearizes every active contact of a recorded step at its converged state.
 pub(super) fn linearize_contacts(sim: &Simulator, rec: &StepRecord) -> Result<Vec<ContactLin>> {
     let h = sim.params().h;
+    let velocity = |k: usize| (rec.x_next[k] - rec.x_prev[k]) / h;
+    linearize_contacts_at(sim, &rec.x_prev, rec.time, &rec.contacts, velocity)
+}
+
+/// Linearizes the active `contacts` of a step entering at `x_prev` (time `time`), given each
+/// contact node's velocity after the contact solve (all impulses applied). At a converged
+/// step that is the step's velocity; the forward's contact Newton (`forward/contact_newton.rs`)
+/// passes the splitting's velocities at an iterate.
+pub(crate) fn linearize_contacts_at(
+    sim: &Simulator,
+    x_prev: &[Vec3],
+    time: f64,
+    contacts: &[crate::contact::Contact],
+    velocity: impl Fn(usize) -> Vec3,
+) -> Result<Vec<ContactLin>> {
+    let h = sim.params().h;
     let mass = sim.masses();
     let mut out = Vec::new();
-    for c in rec.contacts.iter().filter(|c| c.branch != Branch::TakeOff) {
-        let velocity = |k: usize| (rec.x_next[k] - rec.x_prev[k]) / h;
+    for c in contacts.iter().filter(|c| c.branch != Branch::TakeOff) {
         let (s, e, frame, relative, obstacle) = match c.kind {
             ContactKind::Obstacle { node, obstacle } => {
                 let o = &sim.obstacles()[obstacle];
-                let (offset, _) = o.motion.at(rec.time);
+                let (offset, _) = o.motion.at(time);
                 let jac = o
                     .shape
-                    .normal_jacobian_of(&(rec.x_prev[node] - offset), &c.normal);
+                    .normal_jacobian_of(&(x_prev[node] - offset), &c.normal);
                 (
                     vec![(node, 1.0)],
                     vec![(node, 1.0)],
@@ -62,7 +77,7 @@ pub(super) fn linearize_contacts(sim: &Simulator, rec: &StepRecord) -> Result<Ve
                 )
             }
             ContactKind::SelfPair { a, b } => {
-                let dist = (rec.x_prev[a] - rec.x_prev[b]).norm();
+                let dist = (x_prev[a] - x_prev[b]).norm();
                 let jac = (Matrix3::identity() - c.normal * c.normal.transpose())
                     / dist.max(f64::MIN_POSITIVE);
                 (
@@ -128,15 +143,15 @@ pub(super) fn linearize_contacts(sim: &Simulator, rec: &StepRecord) -> Result<Ve
 /// `I - T^T B^T` is singular. Its adjoint system is consistent (the loss sees only the nodes'
 /// motion), so the minimum-norm solution, from the pseudo-inverse, gives the unique `u`.
 #[derive(Default)]
-pub(super) struct ContactCoupling {
-    pub(super) groups: Vec<(Vec<usize>, nalgebra::DMatrix<f64>)>,
+pub(crate) struct ContactCoupling {
+    pub(crate) groups: Vec<(Vec<usize>, nalgebra::DMatrix<f64>)>,
 }
 
 /// Singular values below this fraction of the largest are treated as zero (redundant loops).
 pub(super) const COUPLING_RANK_TOLERANCE: f64 = 1e-10;
 
 impl ContactCoupling {
-    pub(super) fn new(contacts: &[ContactLin], nodes: usize) -> Result<Self> {
+    pub(crate) fn new(contacts: &[ContactLin], nodes: usize) -> Result<Self> {
         let mut touching: Vec<Vec<usize>> = vec![Vec::new(); nodes];
         for (c, lin) in contacts.iter().enumerate() {
             for &(k, _) in &lin.e {

@@ -7,7 +7,7 @@
 //! `dL/dx_n = M z / h^2 - dL/dv_{n+1} / h`, `dL/dv_n = M z / h`, `dL/df_n = z`, and every
 //! parameter theta gets `-z . dg/dtheta`.
 
-mod contact;
+pub(crate) mod contact;
 mod factored;
 mod gradients;
 mod operator;

@@ -19,6 +19,7 @@ use crate::tape::Tape;
 use crate::Vec3;
 use std::sync::Arc;
 
+mod contact_newton;
 mod detection;
 mod diagnostics;
 mod model;
@@ -101,6 +102,7 @@ pub(crate) struct Workspace {
     pub(crate) extrapolated: Vec<Vec3>,
     pub(crate) anderson: Anderson,
     pub(crate) newton: newton::NewtonWork,
+    pub(crate) contact_newton: contact_newton::ContactNewtonWork,
     /// Each constraint set's projections (in `Model::constraint_sets` order).
     pub(crate) projections: Vec<Projections>,
     /// Work rows of the factor's solve.
@@ -127,6 +129,7 @@ impl Workspace {
             extrapolated: zeros.clone(),
             anderson: Anderson::new(history, n),
             newton: newton::NewtonWork::new(model),
+            contact_newton: Default::default(),
             projections: model
                 .constraint_sets()
                 .map(|c| c.new_projections())

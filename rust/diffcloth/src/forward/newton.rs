@@ -53,7 +53,7 @@ const ENERGY_SLACK: f64 = 1e-12;
 /// The polish's buffers, allocated once per simulator.
 pub(crate) struct NewtonWork {
     /// Each constraint set's weighted projection Jacobians at the iterate.
-    lin: Vec<Vec<f64>>,
+    pub(super) lin: Vec<Vec<f64>>,
     /// The step `d`, `H d`, and PCG's residual, preconditioned residual, direction and `H p`.
     d: Vec<Vec3>,
     hd: Vec<Vec3>,
@@ -171,7 +171,12 @@ impl Simulator {
 
     /// Evaluates the map at the trial (`extrapolated`, energy `trial_energy`): kept if E fell
     /// measurably, or else if its update is smaller; otherwise `x` and `G(x)` are restored.
-    fn evaluate_trial(&mut self, p: &mut Progress, trial_energy: f64, measurable: bool) -> bool {
+    pub(super) fn evaluate_trial(
+        &mut self,
+        p: &mut Progress,
+        trial_energy: f64,
+        measurable: bool,
+    ) -> bool {
         self.solve_contacts(Buffer::Extrapolated);
         std::mem::swap(&mut self.work.iterate, &mut self.work.extrapolated);
         std::mem::swap(&mut self.work.mapped, &mut self.work.previous_mapped);
@@ -189,14 +194,14 @@ impl Simulator {
     }
 
     /// `update = G(x) - x` again (a trial's local step overwrote it).
-    fn restore_update(&mut self) {
+    pub(super) fn restore_update(&mut self) {
         let w = &mut self.work;
         for ((u, g), x) in w.update.iter_mut().zip(&w.mapped).zip(&w.iterate) {
             *u = g - x;
         }
     }
 
-    fn linearize_at_iterate(&mut self) {
+    pub(super) fn linearize_at_iterate(&mut self) {
         let w = &mut self.work;
         for (c, lin) in self.model.constraint_sets().zip(&mut w.newton.lin) {
             c.linearize(&w.iterate, lin);

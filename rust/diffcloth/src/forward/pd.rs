@@ -105,10 +105,12 @@ impl Simulator {
     ///
     /// Polish (`solver.polish = "newton"`): once the update is below `newton::POLISH_START`
     /// and no contact pushes, trust-region Newton steps take over (`newton.rs`); the stopping
-    /// test is unchanged.
+    /// test is unchanged. With `"semismooth"`, where contacts push, semi-smooth Newton steps
+    /// are tried once the update is below `contact_newton::START` (`contact_newton.rs`).
     pub(super) fn solve_pd(&mut self) -> StepStats {
         self.work.iterate.copy_from_slice(&self.work.y);
         self.work.anderson.reset();
+        self.work.contact_newton.start_step();
         if let Some(t) = self.trace.as_mut() {
             t.clear();
         }
@@ -121,7 +123,8 @@ impl Simulator {
         self.record(energy, residual);
         let history = self.work.anderson.history();
         let accelerate = self.solver.acceleration == Acceleration::Anderson;
-        let polish = self.solver.polish == Polish::Newton;
+        let polish = self.solver.polish != Polish::None;
+        let contact_newton = self.solver.polish == Polish::Semismooth;
         let mut p = Progress::new(energy, residual, accelerate, history);
         while p.residual > tol && p.iterations < max_it {
             // While no contact pushes (all take off at the iterate), E is the exact objective
@@ -131,6 +134,15 @@ impl Simulator {
                 if self.try_newton(&mut p) {
                     self.record(p.energy, p.residual);
                 }
+                continue;
+            }
+            if contact_newton
+                && !energy_guard
+                && p.escape_scale == 1.0
+                && p.residual <= p.contact_newton_below
+                && self.try_contact_newton(&mut p)
+            {
+                self.record(p.energy, p.residual);
                 continue;
             }
             let previous = (p.residual, p.energy);

@@ -25,6 +25,8 @@ pub(super) struct Progress {
     /// Newton polish: tried while the update is below this (lowered after a rejection).
     pub(super) newton_below: f64,
     pub(super) trust: super::newton::TrustRegion,
+    /// Contact Newton (`polish = "semismooth"`): tried while the update is below this.
+    pub(super) contact_newton_below: f64,
 }
 
 impl Progress {
@@ -42,6 +44,7 @@ impl Progress {
             stall_window: 2 * history + 4,
             newton_below: super::newton::POLISH_START,
             trust: Default::default(),
+            contact_newton_below: super::contact_newton::START,
         }
     }
 
