@@ -17,7 +17,8 @@ Scenes (one thread, release build):
   that contact starts in the first steps.
 
 Settings: ``env`` (every env's rule: tolerance 1e-10 for plain and recorded steps, cap 2000,
-``polish = "newton"``) and ``gradient`` (the library's gradient preset: Anderson, 1e-11, no
+the env's polish: Hat-v0 ``semismooth``, Sock-v0 none, ``newton`` for the scenes without an
+env), ``semismooth`` (the same with the semismooth contact polish, where that is not the env's) and ``gradient`` (the library's gradient preset: Anderson, 1e-11, no
 polish). The reference for each scene is the same rollout at tolerance 1e-13 (cap 20000),
 backward with the direct solver. Loss: random linear weights on every step's positions
 (controller style); the gradient is d loss / d(x0, v0, attachment targets of every step).
@@ -46,18 +47,23 @@ from diffcloth_gym.envs.hat_v0 import HatTask
 from diffcloth_gym.envs.sock_v0 import TEST_STARTS as SOCK_STARTS, SockTask
 from diffcloth_gym.scenes import load_scene
 
-ENV_SETTINGS = dict(tolerance=1e-10, record_tolerance=1e-10, max_iterations=2000, record_max_iterations=2000,
-                    polish="newton")
+ENV_SETTINGS = dict(tolerance=1e-10, record_tolerance=1e-10, max_iterations=2000, record_max_iterations=2000)
 GRADIENT_SETTINGS = dict(preset="gradient", polish="none")
 REFERENCE_SETTINGS = dict(tolerance=1e-13, record_tolerance=1e-13, max_iterations=20000,
                           record_max_iterations=20000)
-SETTINGS = {"env": ENV_SETTINGS, "gradient": GRADIENT_SETTINGS}
+SETTINGS = {"env": ENV_SETTINGS, "semismooth": {**ENV_SETTINGS, "polish": "semismooth"},
+            "gradient": GRADIENT_SETTINGS}
 
 
 class Case:
     """One scene: its config, start state and per-step attachment targets (or None)."""
 
-    def __init__(self, name, cfg, steps, x0=None, v0=None, targets=None):
+    def __init__(self, name, cfg, steps, x0=None, v0=None, targets=None, env=False):
+        # An env's scene keeps the env's polish (none if it sets none); the scenes without an
+        # env polish contact-free steps with Newton, as Hat-v0 did.
+        solver = dict(cfg.get("solver", {}))
+        solver["polish"] = solver.get("polish", "none") if env else solver.get("polish", "newton")
+        cfg = {**cfg, "solver": solver}
         self.name, self.cfg, self.steps = name, cfg, steps
         self.x0, self.v0, self.targets = x0, v0, targets
 
@@ -73,14 +79,14 @@ def hat_case(steps: int) -> Case:
     start = engine.task.start((0.0, 0.0))
     handles = engine.task.handles
     end = engine.task.target_np[handles]
-    return Case("hat", engine.scene, steps, start.x, start.v, _line(start.control, end, steps, 250))
+    return Case("hat", engine.scene, steps, start.x, start.v, _line(start.control, end, steps, 250), env=True)
 
 
 def sock_case(steps: int) -> Case:
     engine = ClothEngine(SockTask, 1)
     start = engine.task.start(SOCK_STARTS[0])
     end = engine.task.worn[engine.task.handles]
-    return Case("sock", engine.scene, steps, start.x, start.v, _line(start.control, end, steps, 400))
+    return Case("sock", engine.scene, steps, start.x, start.v, _line(start.control, end, steps, 400), env=True)
 
 
 def sphere_case(res: int, steps: int) -> Case:
@@ -138,7 +144,7 @@ def gradient(sim: Simulator, weights: np.ndarray, solver: str | None) -> tuple[n
     return flat, g, wall
 
 
-def measure(case: Case, label: str) -> list[dict]:
+def measure(case: Case, label: str, settings_names: Sequence[str]) -> list[dict]:
     t = time.perf_counter()
     ref_sim, ref_prof, ref_unconv = rollout(case, REFERENCE_SETTINGS)
     print(f"{case.name} reference: {time.perf_counter() - t:.1f} s, {ref_prof['iterations'] / case.steps:.0f} it/step, "
@@ -148,7 +154,10 @@ def measure(case: Case, label: str) -> list[dict]:
     g_ref, _, _ = gradient(ref_sim, weights, "direct")
     scale = np.abs(g_ref).max()
     rows = []
-    for name, settings in SETTINGS.items():
+    for name in settings_names:
+        settings = SETTINGS[name]
+        if name == "semismooth" and case.cfg["solver"]["polish"] == "semismooth":
+            continue  # the env's own setting already
         sim, prof, unconv = rollout(case, settings)
         g, out, wall = gradient(sim, weights, None)
         steps = case.steps
@@ -158,6 +167,7 @@ def measure(case: Case, label: str) -> list[dict]:
             "nodes": n,
             "steps": steps,
             "setting": name,
+            "polish": sim.solver()["polish"],
             "fwd_ms": 1e3 * prof["total_s"] / steps,
             "pd_iters": prof["iterations"] / steps,
             "newton_steps": prof["newton_steps"] / steps,
@@ -190,10 +200,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--label", default="current", help="tag of this run's rows (e.g. before / after)")
     p.add_argument("--scenes", nargs="*", default=ALL_SCENES, choices=ALL_SCENES)
+    p.add_argument("--settings", nargs="*", default=list(SETTINGS), choices=list(SETTINGS))
     p.add_argument("--quick", action="store_true", help="20 steps per scene")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
-    new = [r for make in cases(args.scenes, args.quick) for r in measure(make(), args.label)]
+    new = [r for make in cases(args.scenes, args.quick) for r in measure(make(), args.label, args.settings)]
     done = {(r["label"], r["scene"]) for r in new}
     old = [r for r in results_io.read_rows("gradient_cost", out_dir=args.out)
            if (r.get("label"), r.get("scene")) not in done]
