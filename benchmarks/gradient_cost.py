@@ -204,15 +204,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="20 steps per scene")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
-    new = [r for make in cases(args.scenes, args.quick) for r in measure(make(), args.label, args.settings)]
-    done = {(r["label"], r["scene"]) for r in new}
-    old = [r for r in results_io.read_rows("gradient_cost", out_dir=args.out)
-           if (r.get("label"), r.get("scene")) not in done]
-    rows = old + new
     notes = (__doc__.split("\n\n", 1)[1].split("Writes")[0].strip().replace("\n", " ")
              + " Target (issue 15): Hat forward + backward <= 5 ms/step at grad_err <= 1e-3.")
-    out = results_io.write("gradient_cost", rows, results_io.meta({"label": args.label, "scenes": args.scenes}),
-                           "Gradient cost per step", notes, out_dir=args.out)
+    new = []
+    for make in cases(args.scenes, args.quick):
+        new += measure(make(), args.label, args.settings)
+        # Written after every scene: a long run stopped early keeps what it measured.
+        done = {(r["label"], r["scene"]) for r in new}
+        old = [r for r in results_io.read_rows("gradient_cost", out_dir=args.out)
+               if (r.get("label"), r.get("scene")) not in done]
+        out = results_io.write("gradient_cost", old + new,
+                               results_io.meta({"label": args.label, "scenes": args.scenes}),
+                               "Gradient cost per step", notes, out_dir=args.out)
     print(results_io.markdown_table(new))
     print(f"wrote {out}")
     return 0
