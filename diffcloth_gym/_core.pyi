@@ -159,6 +159,9 @@ class Batch:
         """(recorded steps, bytes held) of each member's tape ((0, 0) when not recording)."""
     def last_steps(self) -> list[dict[str, Any]]:
         """The last step's solver stats of each member."""
+    def last_stats(self) -> dict[str, npt.NDArray[Any]]:
+        """The last step's solver stats of every member as arrays: ``iterations`` (N,) int64,
+        ``residual`` (N,) float64, ``converged`` (N,) bool."""
     def profile(self, index: int) -> dict[str, Any]:
         """The profile (times, iteration and contact counts) of member `index`."""
     def backward_step(
