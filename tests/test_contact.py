@@ -74,7 +74,12 @@ def test_sock_contact_steps_converge_at_the_recording_tolerance():
     Pinned to the per-vertex bending model the bug was found with: this rollout reaches the
     self-contact that triggered it only with that model (with the edge model, now the default,
     the sock moves differently and never reaches a take-off contact in 190 steps), and the bug
-    was in the contact solve, not in bending."""
+    was in the contact solve, not in bending.
+
+    Since self-contact candidates are found from relative velocities (Galilean invariant),
+    the take-off candidate at step 181, made by the sock's bulk drag, is no longer one; the
+    rollout's first take-off candidate is at step 202 and real contact follows, so it runs 230
+    steps."""
     cfg = load_scene("sock")
     cfg["material"]["bend_model"] = "vertex"
     sim = Simulator.from_config(cfg)
@@ -82,7 +87,7 @@ def test_sock_contact_steps_converge_at_the_recording_tolerance():
     sim.reset(v=np.random.default_rng(0).normal(0, 0.2, (sim.num_nodes, 3)))
     t0 = sim.attachment_targets
     worst = 0
-    for k in range(190):
+    for k in range(230):
         stats = sim.step(attachment_targets=t0 + np.array([0.0, -0.003 * k, 0.002 * k]))
         assert stats["converged"], (k, stats)
         worst = max(worst, stats["iterations"])

@@ -146,7 +146,8 @@ impl ContactSet {
 
     /// Finds this step's contacts from the entering state `(x, v)` at time `t`. A candidate is
     /// anything the step's motion could bring into contact: within the contact distance plus
-    /// the margin plus twice the distance the nodes' current velocity covers in one step.
+    /// the margin plus twice the distance the nodes' current velocity covers in one step
+    /// (for a self-contact pair, their velocity relative to each other).
     #[allow(clippy::too_many_arguments)]
     pub fn detect(
         &mut self,
@@ -190,13 +191,17 @@ impl ContactSet {
             }
         }
         if let Some(sc) = self_collision {
-            // Cells sized for the fastest pair; each pair then kept only within its own reach.
-            let v_max = v.iter().map(|vi| vi.norm()).fold(0.0, f64::max);
+            // A pair's distance changes with its relative velocity only, so the reach is
+            // Galilean invariant: a cloth carried fast keeps the candidates of a cloth at rest.
+            // Cells are sized for the fastest pair (|v_a - v_b| <= 2 max |v_i - v_mean|), each
+            // pair then kept only within its own reach.
+            let v_mean = v.iter().fold(Vec3::zeros(), |s, vi| s + vi) / v.len().max(1) as f64;
+            let spread = v.iter().map(|vi| (vi - v_mean).norm()).fold(0.0, f64::max);
             let base = sc.radius + settings.margin;
             self.pairs.clear();
-            sc.find_pairs(x, base + 4.0 * h * v_max, &mut self.hash, &mut self.pairs);
+            sc.find_pairs(x, base + 4.0 * h * spread, &mut self.hash, &mut self.pairs);
             for &(a, b, distance) in &self.pairs {
-                if distance >= base + 2.0 * h * (v[a].norm() + v[b].norm()) {
+                if distance >= base + 2.0 * h * (v[a] - v[b]).norm() {
                     continue;
                 }
                 let normal = if distance > 0.0 {

@@ -108,3 +108,48 @@ fn a_cloth_folded_exactly_onto_itself_is_reported_and_gains_the_push_out_energy(
         "the issue's 48 % and more: {gained} vs {e0}"
     );
 }
+
+/// Galilean invariance: the same fold closing at 0.5 m/s, once at rest and once carried at
+/// 40 m/s (a hat swung by its handles). Self-contact depends on relative motion only, so the
+/// candidate pairs must be the same each step (a reach from absolute speeds made thousands of
+/// far pairs candidates and a step minutes long) and the motion the same up to the carry.
+#[test]
+fn self_contact_candidates_and_motion_are_invariant_under_a_uniform_carry() {
+    let carry = Vec3::new(40.0, 0.0, 0.0);
+    let closing = |sim: &Simulator, extra: Vec3| -> Vec<Vec3> {
+        (0..sim.num_nodes())
+            .map(|j| {
+                let upper = sim.positions()[j].y > 0.5 * RADIUS;
+                extra + if upper { Vec3::new(0.0, -0.5, 0.0) } else { Vec3::zeros() }
+            })
+            .collect()
+    };
+    let mut rest = folded_cloth(1.5 * RADIUS);
+    let mut carried = folded_cloth(1.5 * RADIUS);
+    let v_rest = closing(&rest, Vec3::zeros());
+    let v_carried = closing(&carried, carry);
+    // `reset` without positions would unfold the cloth to the mesh's rest shape.
+    let fold = rest.positions().to_vec();
+    rest.reset(Some(&fold), Some(&v_rest)).unwrap();
+    carried.reset(Some(&fold), Some(&v_carried)).unwrap();
+    let h = rest.params().h;
+    for step in 1..=40 {
+        rest.step(StepInput::default()).unwrap();
+        carried.step(StepInput::default()).unwrap();
+        assert_eq!(
+            rest.contacts().len(),
+            carried.contacts().len(),
+            "step {step}: candidate pairs"
+        );
+        let shift = carry * (h * step as f64);
+        let worst = rest
+            .positions()
+            .iter()
+            .zip(carried.positions())
+            .map(|(a, b)| (b - shift - a).norm())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-6, "step {step}: carried fold differs by {worst} m");
+    }
+    let touched = rest.profile().contacts_stick + rest.profile().contacts_slip;
+    assert!(touched > 0, "the layers met");
+}
