@@ -5,6 +5,7 @@ backward solver table, gradient error vs forward tolerance, time step), ``stabil
 hard-case suite; ``--full`` for the full size), ``step_time`` (forward ms/step per solver
 setting, and the contact scenes), ``backward_time`` (adjoint ms/step per solver), ``gradient_cost``
 (forward + polish + backward ms/step at the envs' accuracy and the gradient's error),
+``gradient_horizon`` (over how many contact-rich steps a gradient is still the loss's derivative),
 ``env_throughput`` (env steps/s single and batched, step_grad cost, frames/s), ``render``
 (frames/s of the software renderer; ``render --images`` writes docs/images/) and ``openloop``
 (open-loop optimization: ``openloop fig4``, the paper's Fig. 4; results ``openloop.{json,md}``). Each writes
@@ -23,6 +24,7 @@ STUDIES = {
     "step_time": "benchmarks.step_time",
     "backward_time": "benchmarks.backward_time",
     "gradient_cost": "benchmarks.gradient_cost",
+    "gradient_horizon": "benchmarks.gradient_horizon",
     "env_throughput": "benchmarks.env_throughput",
     "render": "benchmarks.render",
     "openloop": "benchmarks.openloop",
