@@ -18,7 +18,8 @@ gradient or the reference is wrong, per scene and horizon:
 Scenes: the sphere drops of ``gradient_cost`` at 24 and 48 nodes a side, and its ``hat`` (carried
 onto the head by its effectors). Variants: ``full`` (the scene as shipped), ``mu0`` (frictionless obstacles), ``noself``
 (without self-collision). Solver: the gradient preset (Anderson, no polish), cap 20000.
-Writes benchmarks/results/gradient_horizon.{json,md}.
+Writes benchmarks/results/gradient_horizon.{json,md}; a run replaces only the rows it measures
+(same scene, variant and horizon), so the header names the last run's command.
 
 Run: .venv/bin/python -m benchmarks gradient_horizon [--scenes sphere48x48 ...] [--horizons 10 25 50 100]
      [--variants full mu0] [--out DIR]
@@ -108,11 +109,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = p.parse_args(argv)
     notes = __doc__.split("\n\n", 1)[1].split("Writes")[0].strip().replace("\n", " ")
     rows = []
+    key = lambda r: (r.get("scene"), r.get("variant"), r.get("steps"))
     for scene in args.scenes:
         for variant in args.variants:
             for steps in args.horizons:
                 rows.append(measure(scene, variant, steps))
-                out = results_io.write("gradient_horizon", rows,
+                # Rows of earlier runs (other scenes, variants or horizons) are kept.
+                done = {key(r) for r in rows}
+                old = [r for r in results_io.read_rows("gradient_horizon", out_dir=args.out) if key(r) not in done]
+                out = results_io.write("gradient_horizon", old + rows,
                                        results_io.meta({"scenes": args.scenes, "horizons": args.horizons}),
                                        "Gradient horizon", notes, out_dir=args.out)
     print(results_io.markdown_table(rows))
