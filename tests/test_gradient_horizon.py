@@ -9,7 +9,7 @@ from benchmarks import gradient_horizon
 
 
 def test_a_short_contact_rich_horizon_has_an_exact_reproducible_gradient(tmp_path):
-    row = gradient_horizon.measure("sphere24x24", "full", 10)
+    row = gradient_horizon.measure("sphere24x24", "full", 10, "env")
     assert row["pushing_steps"] >= 5, row
     assert row["fd_err_1e-06"] < 1e-3, row
     assert row["repro_err"] < 1e-6, row
