@@ -210,12 +210,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     for make in cases(args.scenes, args.quick):
         new += measure(make(), args.label, args.settings)
         # Written after every scene: a long run stopped early keeps what it measured.
-        done = {(r["label"], r["scene"]) for r in new}
-        old = [r for r in results_io.read_rows("gradient_cost", out_dir=args.out)
-               if (r.get("label"), r.get("scene")) not in done]
-        out = results_io.write("gradient_cost", old + new,
-                               results_io.meta({"label": args.label, "scenes": args.scenes}),
-                               "Gradient cost per step", notes, out_dir=args.out)
+        out = results_io.write_merged("gradient_cost", new, lambda r: (r.get("label"), r.get("scene")),
+                                      results_io.meta({"label": args.label, "scenes": args.scenes}),
+                                      "Gradient cost per step", notes, out_dir=args.out)
     print(results_io.markdown_table(new))
     print(f"wrote {out}")
     return 0

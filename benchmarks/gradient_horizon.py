@@ -125,11 +125,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             for steps in args.horizons:
                 rows.append(measure(scene, variant, steps, args.polish))
                 # Rows of earlier runs (other scenes, variants or horizons) are kept.
-                done = {key(r) for r in rows}
-                old = [r for r in results_io.read_rows("gradient_horizon", out_dir=args.out) if key(r) not in done]
-                out = results_io.write("gradient_horizon", old + rows,
-                                       results_io.meta({"scenes": args.scenes, "horizons": args.horizons}),
-                                       "Gradient horizon", notes, out_dir=args.out)
+                out = results_io.write_merged("gradient_horizon", rows, key,
+                                              results_io.meta({"scenes": args.scenes, "horizons": args.horizons}),
+                                              "Gradient horizon", notes, out_dir=args.out)
     print(results_io.markdown_table(rows))
     print(f"wrote {out}")
     return 0

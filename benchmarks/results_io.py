@@ -80,3 +80,12 @@ def read_rows(name: str, out_dir: Path | None = None) -> list[dict]:
     runs replace only part of the table)."""
     path = Path(out_dir or RESULTS_DIR) / f"{name}.json"
     return json.loads(path.read_text())["rows"] if path.exists() else []
+
+
+def write_merged(name: str, rows: list[dict], key, meta_block: dict, title: str, notes: str = "",
+                 out_dir: Path | None = None) -> Path:
+    """``write`` that keeps the earlier rows whose ``key(row)`` none of ``rows`` has (for
+    studies whose runs measure part of the table, and write after every measurement)."""
+    done = {key(r) for r in rows}
+    old = [r for r in read_rows(name, out_dir=out_dir) if key(r) not in done]
+    return write(name, old + rows, meta_block, title, notes, out_dir=out_dir)
