@@ -126,6 +126,10 @@ def test_ppo_killed_between_evaluations_resumes_bitwise_and_a_late_run_does_not_
     assert summary["curve"] == [] and summary["final_test_loss"] is None and summary["forward"] == 0
     late_apg = APGTrainer(apg_cfg(), tmp_path / "late_apg", progress=False, eval_starts=STARTS[:1])
     assert late_apg.train(deadline=time.time() - 1)["curve"] == []
+    # A run that did not start leaves no log files behind (no empty TensorBoard events).
+    for run in ("late", "late_apg"):
+        assert [f for f in (tmp_path / run).rglob("*") if f.is_file() and f.name.startswith("events.")] == []
+    assert list((tmp_path / "part" / "sb3").glob("events.*")) and list((tmp_path / "full" / "sb3").glob("events.*"))
 
 
 def test_a_run_is_not_resumed_under_other_solver_settings(tmp_path, monkeypatch):

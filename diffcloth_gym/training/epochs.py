@@ -112,7 +112,8 @@ class EpochTrainer:
         self._evaluator = Evaluator(c["env_id"], self.eval_starts, c["env"])
         self.last_eval: list[dict] = []
         self.eval_steps = 0
-        self.train_log = self.eval_log = self.tensorboard = None
+        self.train_log = self.eval_log = None
+        self._tensorboard, self._tensorboard_purge = None, None
         self.build()
         if self.run_dir is not None:
             self.run_dir.mkdir(parents=True, exist_ok=True)
@@ -120,7 +121,16 @@ class EpochTrainer:
             self.eval_log = CsvLog(self.run_dir / "eval.csv")
             if resume:
                 self._resume()
-            self.tensorboard = _tensorboard_writer(self.run_dir / "tb", purge_step=self.counter.forward)
+            # Opened on first write: a run whose turn never comes this session leaves no file.
+            self._tensorboard_purge = self.counter.forward
+
+    @property
+    def tensorboard(self):
+        """The run's TensorBoard writer (None without a run folder or ``tensorboard``)."""
+        if self._tensorboard is None and self._tensorboard_purge is not None:
+            self._tensorboard = _tensorboard_writer(self.run_dir / "tb", purge_step=self._tensorboard_purge)
+            self._tensorboard_purge = None
+        return self._tensorboard
 
     # -- hooks -----------------------------------------------------------------------------------
     def build(self) -> None:

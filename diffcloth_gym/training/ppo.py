@@ -58,7 +58,6 @@ class PPOTrainer:
     def __init__(self, cfg: Mapping[str, Any] | None = None, run_dir: str | Path | None = None, seed: int = 0,
                  resume: bool = True, progress: bool = True, eval_starts: list | None = None):
         from stable_baselines3 import PPO
-        from stable_baselines3.common.logger import configure
         from stable_baselines3.common.vec_env import VecMonitor
 
         from diffcloth_gym.envs.sb3 import ClothSB3VecEnv
@@ -102,16 +101,9 @@ class PPOTrainer:
             self.model = PPO.load(io.BytesIO(ck["model"]), env=self.venv, device="cpu")
             self._restore(ck)
         self.eval_log = None
+        self._logger_set = False
         if self.run_dir is not None:
             self.run_dir.mkdir(parents=True, exist_ok=True)
-            formats = ["csv"]
-            try:
-                import tensorboard  # noqa: F401
-
-                formats.append("tensorboard")
-            except ImportError:
-                pass
-            self.model.set_logger(configure(str(self.run_dir / "sb3"), formats))
             self.eval_log = CsvLog(self.run_dir / "eval.csv")
             if ck is not None:
                 self.eval_log.truncate("steps", self.model.num_timesteps)
@@ -170,9 +162,10 @@ class PPOTrainer:
         total = int(self.cfg["timesteps"] if timesteps is None else timesteps)
         self.target_timesteps = total
         chunk = max(1, -(-int(self.cfg["eval_every"]) // self.rollout)) * self.rollout
+        if not self.curve and deadline is not None and time.time() >= deadline:
+            return self.summary()
+        self._set_logger()
         if not self.curve:
-            if deadline is not None and time.time() >= deadline:
-                return self.summary()
             self._eval_point()
             self.save()
         bar = tqdm(total=total, initial=self.model.num_timesteps, desc=f"ppo seed {self.seed}",
@@ -190,6 +183,23 @@ class PPOTrainer:
             self.save()
         bar.close()
         return self.summary()
+
+    def _set_logger(self) -> None:
+        """SB3's CSV (and TensorBoard) logs in the run folder, made when training starts: a run
+        whose turn never comes this session leaves no empty event file."""
+        from stable_baselines3.common.logger import configure
+
+        if self.run_dir is None or self._logger_set:
+            return
+        formats = ["csv"]
+        try:
+            import tensorboard  # noqa: F401
+
+            formats.append("tensorboard")
+        except ImportError:
+            pass
+        self.model.set_logger(configure(str(self.run_dir / "sb3"), formats))
+        self._logger_set = True
 
     def summary(self) -> dict[str, Any]:
         last = self.curve[-1] if self.curve else {}
