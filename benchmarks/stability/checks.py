@@ -88,8 +88,9 @@ def evaluate(r: dict) -> dict[str, tuple[bool, str]]:
 
 #: Simulator bugs the suite reveals and that are still open: name -> (title, details with a
 #: reproducer). Fixed since: singular redundant contact loops, pyramid-pit edges, OBJ slivers,
-#: contacts missed by detection from the entering velocity (late detection), and union
-#: obstacles giving one contact per node (nearest part only).
+#: contacts missed by detection from the entering velocity (late detection), union
+#: obstacles giving one contact per node (nearest part only), and edge bending on slivers
+#: (unbounded hinge stiffness: the stencil is capped, `energy/bend_edge.rs` MAX_COT).
 ISSUES: dict[str, tuple[str, str]] = {
     "stiff_contact": (
         "contact PD stalls at stiff k_stretch h^2/m: nodes go through the obstacle, energy grows",
@@ -106,17 +107,6 @@ ISSUES: dict[str, tuple[str, str]] = {
         "default: its Gauss-Seidel on W is as slow as the inertia splitting when many stiff nodes are all in "
         "contact (large_step_slope: every step unconverged, travel error 4e-6 > 1e-6). Note: PD itself converges "
         "slowly here; 20000 iterations leave a residual of 1e-7 with either response."),
-    "edge_bend_slivers": (
-        "edge bending on aspect-1e-5 slivers: energy grows, the napkin never lands",
-        "Since the edge bending model became the default, case obj_sliver_1e-5 (ci size) ends with "
-        "max E(t)/E(0) = 235, 0 active obstacle contacts and a self pair at 0.0182 m < 0.0198 (since "
-        "self-contact candidates come from relative velocities: E ratio 70, closest pair 0.0201 m, so "
-        "self_distance passes and energy and physics still fail); "
-        "with material.bend_model = 'vertex' it passed every check. The edge model's cotangent weights "
-        "grow like 1/aspect and its weight 3 k_bend / (A0 + A1) like 1/area, so a sliver hinge is far "
-        "stiffer than with the area-weighted vertex model; the loader's sliver bound (2 area / longest "
-        "edge^2 >= 1e-6) was chosen for the vertex model. Not yet investigated (bound, or the PD "
-        "iteration at this stiffness). Reproducer: python -m benchmarks stability --case obj_sliver_1e-5."),
 }
 #: Which case checks the :data:`ISSUES` break: ``(case, check) -> (sizes, issue)``. The tests
 #: assert every other check and mark exactly these ``xfail(strict=True)`` (so a fix shows up as
@@ -128,8 +118,6 @@ KNOWN_ISSUES: dict[tuple[str, str], tuple[tuple[str, ...], tuple[str, ...]]] = {
     ("large_step_sphere_h10", "penetration"): (SIZES, ("stiff_contact",)),
     ("large_step_sphere_h10", "thickness_layer"): (SIZES, ("stiff_contact",)),
     ("large_step_sphere_h10", "energy"): (SIZES, ("stiff_contact",)),
-    ("obj_sliver_1e-5", "energy"): (("ci",), ("edge_bend_slivers",)),
-    ("obj_sliver_1e-5", "physics"): (("ci",), ("edge_bend_slivers",)),
 }
 
 
