@@ -37,10 +37,9 @@ const FLAT_REST_LENGTH: f64 = 1e-6;
 
 /// Largest cotangent a hinge's stencil may carry; a hinge beyond it has its whole stencil
 /// scaled down to it. The stiffness of a hinge grows like `cot^2 / (A0 + A1)`, without bound on
-/// a sliver: with one of aspect 1e-5 (cot 1e5) the Hessian's condition number nears 1e14 and
-/// converged steps gained energy (E(t)/E(0) up to 235 falling onto a sphere, 18 hanging from a
-/// corner without contact;
-/// stability case `obj_sliver_1e-5`). Scaling the stencil, not clamping single cotangents,
+/// a sliver: with one of aspect 1e-5 (cot 1e5; the system's condition number, estimated from
+/// the weights, near 1e14) converged steps gained energy (E(t)/E(0) up to 235 falling onto a
+/// sphere, 18 hanging from a corner without contact; stability case `obj_sliver_1e-5`). Scaling the stencil, not clamping single cotangents,
 /// keeps `sum_j w_j = 0` and `e(X_rest) = 0` on a planar hinge (clamping made a planar sliver
 /// hinge a curved one, and the napkin blew up). 1e3 is an angle of 0.057 degrees: no shipped
 /// or reference mesh comes near it (their thinnest triangles have aspect 3e-2), so only
