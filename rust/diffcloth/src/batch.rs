@@ -10,7 +10,6 @@ use crate::error::{Error, Result};
 use crate::forward::{Model, Simulator, StepInput, StepStats};
 use crate::params::SolverSettings;
 use crate::Vec3;
-use rayon::prelude::*;
 use std::sync::Arc;
 
 /// Largest batch (a bound on the memory one call may ask for).
@@ -21,10 +20,16 @@ pub const MAX_THREADS: usize = 1024;
 
 pub struct Batch {
     members: Vec<Member>,
-    /// The batch's own thread pool, when it was given a thread count; else rayon's global
-    /// pool. Owning one lets a process run batches at different thread counts side by side
-    /// (and a benchmark compare them in one run).
-    pool: Option<rayon::ThreadPool>,
+    /// Threads a parallel call runs on: the calling thread and `threads - 1` helpers.
+    threads: usize,
+    /// The helpers' pool: `threads - 1` workers (none on one thread), owned so that a
+    /// process can run batches at different thread counts side by side. The caller works
+    /// too (`batch_shared.rs`), so a pool of `threads` workers would hold a spare one: rayon
+    /// wakes a sleeping worker whenever another finds work (`Sleep::work_found`), and the
+    /// spare spun for a core every step (32-member FlyingNapkin on 2 threads: a thread
+    /// waiting for a core 33 % of the time, 1.87 cores obtained; with the smaller pool 0.2 %
+    /// and 1.96).
+    helpers: Option<rayon::ThreadPool>,
 }
 
 /// One simulator of the batch and the warm start of its chained one-step adjoints.
@@ -41,26 +46,13 @@ pub struct MemberInput<'a> {
 }
 
 impl Batch {
-    /// `size` simulators on `model`, each at the rest state with `solver`.
+    /// `size` simulators on `model`, each at the rest state with `solver`, stepped on as
+    /// many threads as the current rayon pool has (the global pool outside any).
     pub fn new(model: Arc<Model>, solver: SolverSettings, size: usize) -> Result<Self> {
-        if size == 0 || size > MAX_BATCH {
-            return Err(Error::Input(format!(
-                "batch size must be in 1..={MAX_BATCH}, got {size}"
-            )));
-        }
-        let members = (0..size)
-            .map(|_| Member {
-                sim: Simulator::from_model(model.clone(), solver.clone()),
-                warm: None,
-            })
-            .collect();
-        Ok(Self {
-            members,
-            pool: None,
-        })
+        Self::build(model, solver, size, rayon::current_num_threads())
     }
 
-    /// As [`Batch::new`], stepped on a pool of its own with `threads` threads.
+    /// As [`Batch::new`], stepped on `threads` threads.
     pub fn with_threads(
         model: Arc<Model>,
         solver: SolverSettings,
@@ -72,38 +64,50 @@ impl Batch {
                 "threads must be in 1..={MAX_THREADS}, got {threads}"
             )));
         }
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .map_err(|e| Error::Input(format!("threads: cannot start {threads} threads: {e}")))?;
-        let mut batch = Self::new(model, solver, size)?;
-        batch.pool = Some(pool);
-        Ok(batch)
+        Self::build(model, solver, size, threads)
+    }
+
+    fn build(
+        model: Arc<Model>,
+        solver: SolverSettings,
+        size: usize,
+        threads: usize,
+    ) -> Result<Self> {
+        if size == 0 || size > MAX_BATCH {
+            return Err(Error::Input(format!(
+                "batch size must be in 1..={MAX_BATCH}, got {size}"
+            )));
+        }
+        let helpers = (threads > 1)
+            .then(|| {
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads - 1)
+                    .build()
+                    .map_err(|e| {
+                        Error::Input(format!("threads: cannot start {threads} threads: {e}"))
+                    })
+            })
+            .transpose()?;
+        let members = (0..size)
+            .map(|_| {
+                let mut sim = Simulator::from_model(model.clone(), solver.clone());
+                // A member's step runs whole on one thread: the members fill the threads.
+                // Splitting a member's own step never paid (2 threads, one member: Hat 0.97x,
+                // Sock 0.98x, FlyingNapkin 0.89x of one thread; env_throughput.md).
+                sim.split_work = false;
+                Member { sim, warm: None }
+            })
+            .collect();
+        Ok(Self {
+            members,
+            threads,
+            helpers,
+        })
     }
 
     /// Threads a parallel call of this batch runs on.
     pub fn threads(&self) -> usize {
-        match &self.pool {
-            Some(pool) => pool.current_num_threads(),
-            None => rayon::current_num_threads(),
-        }
-    }
-
-    /// Whether members split their own steps across threads: only when there are fewer
-    /// members than threads (otherwise the members fill the threads; measured on the 32-member
-    /// FlyingNapkin: 2-thread speed-up 1.65x with nested splitting, 1.84x without).
-    fn splits_member_work(&self) -> bool {
-        self.members.len() < self.threads()
-    }
-
-    /// Runs `f` on the members inside the batch's pool (nested rayon work of the members
-    /// included), or in the caller's pool when the batch has none.
-    fn in_pool<R: Send>(&mut self, f: impl FnOnce(&mut [Member]) -> R + Send) -> R {
-        let members = &mut self.members;
-        match &self.pool {
-            Some(pool) => pool.install(|| f(members)),
-            None => f(members),
-        }
+        self.threads
     }
 
     pub fn len(&self) -> usize {
@@ -139,11 +143,11 @@ impl Batch {
 
     /// Applies `f` to every member in parallel.
     pub fn for_each_mut(&mut self, f: impl Fn(&mut Simulator) + Sync) {
-        self.in_pool(|members| {
-            members.par_iter_mut().for_each(|m| {
-                m.warm = None;
-                f(&mut m.sim)
-            })
+        let helpers = self.helpers.as_ref();
+        let tasks: Vec<&mut Member> = self.members.iter_mut().collect();
+        shared::run(helpers, tasks, |m| {
+            m.warm = None;
+            f(&mut m.sim)
         });
     }
 
@@ -157,31 +161,14 @@ impl Batch {
                 inputs.len()
             )));
         }
-        let step = |m: &mut Member, input: &MemberInput<'_>, split_work: bool| {
-            m.sim.split_work = split_work;
+        let helpers = self.helpers.as_ref();
+        let tasks: Vec<_> = self.members.iter_mut().zip(inputs).collect();
+        Ok(shared::run(helpers, tasks, |(m, input)| {
             m.sim.step(StepInput {
                 attachment_targets: input.attachment_targets,
                 external_forces: input.external_forces,
             })
-        };
-        if self.splits_member_work() {
-            // Fewer members than threads: the members' own steps spread over the pool.
-            return Ok(self.in_pool(|members| {
-                members
-                    .par_iter_mut()
-                    .zip(inputs)
-                    .map(|(m, input)| step(m, input, true))
-                    .collect()
-            }));
-        }
-        let threads = self.threads();
-        let tasks: Vec<_> = self.members.iter_mut().zip(inputs).collect();
-        Ok(shared::run(
-            self.pool.as_ref(),
-            threads,
-            tasks,
-            |(m, input)| step(m, input, false),
-        ))
+        }))
     }
 
     /// The one-step adjoint ([`Simulator::backward_step`]) of recorded step `k` of every
@@ -203,20 +190,15 @@ impl Batch {
                 )));
             }
         }
-        // A member's adjoint runs on one thread (no nested splitting), so the caller shares
-        // in the work whatever the batch size.
-        let threads = self.threads();
+        let helpers = self.helpers.as_ref();
         let tasks: Vec<_> = self
             .members
             .iter_mut()
             .zip(dl_dx.iter().zip(dl_dv))
             .collect();
-        Ok(shared::run(
-            self.pool.as_ref(),
-            threads,
-            tasks,
-            |(m, (gx, gv))| m.sim.backward_step(k, gx, gv, options, &mut m.warm),
-        ))
+        Ok(shared::run(helpers, tasks, |(m, (gx, gv))| {
+            m.sim.backward_step(k, gx, gv, options, &mut m.warm)
+        }))
     }
 
     fn index_error(&self, i: usize) -> Error {

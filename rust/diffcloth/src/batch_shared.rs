@@ -4,8 +4,8 @@
 //! sleep: per call the caller wakes a worker, that worker wakes the next, and the last one
 //! wakes the caller again. Between an env's steps the workers fall asleep (the Python part
 //! takes ~1-2 ms), and in this VM every such wake-up is on the critical path. Here the
-//! caller works too: it spawns `threads - 1` helpers into the pool and starts on the members
-//! at once; every participant takes the next member from a shared counter (greedy list
+//! caller works too: it spawns one job per worker of the helpers' pool (which has one worker
+//! fewer than the call's threads) and starts on the members at once; every participant takes the next member from a shared counter (greedy list
 //! scheduling, one member at a time, so a member with more solver iterations than the others
 //! cannot leave a chunk of members stuck behind it on one thread). On one thread nothing is
 //! spawned: the call runs on the caller alone.
@@ -16,19 +16,20 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
-/// Applies `f` to every task on `threads` threads (the caller and `threads - 1` jobs in
-/// `pool`, or rayon's global pool when `None`); returns the results in task order.
+/// Applies `f` to every task on the calling thread and one job per worker of `helpers`
+/// (none: the caller alone); returns the results in task order.
 pub(crate) fn run<T: Send, R: Send>(
-    pool: Option<&rayon::ThreadPool>,
-    threads: usize,
+    helpers: Option<&rayon::ThreadPool>,
     tasks: Vec<T>,
     f: impl Fn(T) -> R + Sync,
 ) -> Vec<R> {
     let n = tasks.len();
-    let helpers = threads.min(n).saturating_sub(1);
-    if helpers == 0 {
+    let (Some(pool), jobs @ 1..) = (
+        helpers,
+        helpers.map_or(0, |p| p.current_num_threads().min(n.saturating_sub(1))),
+    ) else {
         return tasks.into_iter().map(f).collect();
-    }
+    };
     // Each slot is taken by exactly one participant (the counter hands out each index
     // once), so the locks are never contended; they only make the hand-over safe.
     let slots: Vec<Mutex<Option<T>>> = tasks.into_iter().map(|t| Mutex::new(Some(t))).collect();
@@ -43,10 +44,7 @@ pub(crate) fn run<T: Send, R: Send>(
         let r = f(task);
         *lock(&results[i]) = Some(r);
     };
-    match pool {
-        Some(pool) => pool.in_place_scope(|s| participate(s, helpers, &work)),
-        None => rayon::in_place_scope(|s| participate(s, helpers, &work)),
-    }
+    pool.in_place_scope(|s| participate(s, jobs, &work));
     results
         .into_iter()
         .map(|r| {
@@ -57,9 +55,9 @@ pub(crate) fn run<T: Send, R: Send>(
         .collect()
 }
 
-/// Spawns `helpers` jobs running `work` and runs it on the calling thread too.
-fn participate<'s>(s: &rayon::Scope<'s>, helpers: usize, work: &'s (impl Fn() + Sync)) {
-    for _ in 0..helpers {
+/// Spawns `jobs` jobs running `work` and runs it on the calling thread too.
+fn participate<'s>(s: &rayon::Scope<'s>, jobs: usize, work: &'s (impl Fn() + Sync)) {
+    for _ in 0..jobs {
         s.spawn(move |_| work());
     }
     work();
