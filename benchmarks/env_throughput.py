@@ -108,9 +108,15 @@ def vector_rates(env_id: str, n: int, steps: int, repeats: int, quiet_wait: floa
     best = {t: (min(p[0][t][0] for p in used), min(p[0][t][1] for p in used)) for t in venvs}
     env_rate = {t: n * steps / best[t][0] for t in venvs}
     core_rate = {t: n * steps / best[t][1] for t in venvs}
+    # The speed-up within each pair (back to back, so the host's speed drifts least between
+    # them), median over the pairs used: a check on best/best, which takes each thread
+    # count's best moment separately.
+    pair_speedup = float(np.median([p[0][1][0] / p[0][2][0] for p in used]))
+    pair_core_speedup = float(np.median([p[0][1][1] / p[0][2][1] for p in used]))
     return {"steps_per_s_1t": env_rate[1], "steps_per_s_2t": env_rate[2], "speedup_2t": env_rate[2] / env_rate[1],
+            "speedup_2t_pair_median": pair_speedup,
             "core_steps_per_s_1t": core_rate[1], "core_steps_per_s_2t": core_rate[2],
-            "core_speedup_2t": core_rate[2] / core_rate[1],
+            "core_speedup_2t": core_rate[2] / core_rate[1], "core_speedup_2t_pair_median": pair_core_speedup,
             "pairs_quiet": f"{len(quiet)}/{len(pairs)}",
             "others_cores": float(np.median([p[1] for p in used]))}
 
@@ -228,7 +234,9 @@ def main(argv: list[str] | None = None) -> int:
              "2-thread timings are labelled with the other processes' CPU use ('others_cores', median over "
              "the pairs used; Linux shares the cores between sessions, so a 2-thread run only gets 2 cores "
              "when the others leave them idle): the row is the best of its quiet pairs (others under "
-             f"{machine_load.QUIET_CORES} cores; 'pairs_quiet' counts them) if any, else of all. step_grad: a closed-loop "
+             f"{machine_load.QUIET_CORES} cores; 'pairs_quiet' counts them) if any, else of all; '*_pair_median' is "
+             "the median over those pairs of the speed-up within each pair (timed back to back, so the host's "
+             "speed, which this VM cannot see, drifts least between the two). step_grad: a closed-loop "
              "differentiable rollout's forward and backward time per step, and (forward + backward) / plain "
              "step at the same accuracy (the env's plain and recorded steps share one tolerance). Tape memory "
              "is what a member's recording holds for a full episode (freed at reset).")
