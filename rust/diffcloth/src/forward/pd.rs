@@ -78,7 +78,9 @@ impl Simulator {
             *u -= x;
             sum += u.norm_squared();
         }
-        (sum / (3 * self.work.iterate.len()) as f64).sqrt()
+        let update = (sum / (3 * self.work.iterate.len()) as f64).sqrt();
+        self.work.delassus.set_last_update(update);
+        update
     }
 
     /// PD iterations from the initial guess `y`. Each iteration maps the iterate x to
