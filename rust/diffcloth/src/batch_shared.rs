@@ -5,9 +5,10 @@
 //! wakes the caller again. Between an env's steps the workers fall asleep (the Python part
 //! takes ~1-2 ms), and in this VM every such wake-up is on the critical path. Here the
 //! caller works too: it spawns one job per worker of the helpers' pool (which has one worker
-//! fewer than the call's threads) and starts on the members at once; every participant takes the next member from a shared counter (greedy list
-//! scheduling, one member at a time, so a member with more solver iterations than the others
-//! cannot leave a chunk of members stuck behind it on one thread). On one thread nothing is
+//! fewer than the call's threads) and starts on the members at once; every participant takes
+//! the next member from a shared counter (greedy list scheduling, one member at a time, so a
+//! member with more solver iterations than the others cannot leave a chunk of members stuck
+//! behind it on one thread). On one thread nothing is
 //! spawned: the call runs on the caller alone.
 //!
 //! Which thread runs a member does not change its arithmetic (members share only the

@@ -12,9 +12,9 @@
 //! solved for and `W = C G` (scalar, the same for x, y and z) is kept. Every PD iteration
 //! solves the contact law on `x = x^ + G r`, `x^ = P^{-1} rhs`, by projected Gauss-Seidel on
 //! `W` (which converges for SPD `W`; it stops once a sweep moves no node by more than
-//! [`SWEEP_FRACTION`] of the iteration's update), then applies `G r`. The fixed point is the same as the
-//! inertia splitting's (the law holds for the solved velocities), so the adjoint, which
-//! linearizes the inertia-split law at that point, is unchanged.
+//! [`SWEEP_FRACTION`] of the iteration's update), then applies `G r`. The fixed point is the
+//! same as the inertia splitting's (the law holds for the solved velocities), so the adjoint,
+//! which linearizes the inertia-split law at that point, is unchanged.
 
 use crate::contact::{signorini_coulomb, Contact, ContactKind};
 use crate::linalg::SpdFactor;
