@@ -145,6 +145,21 @@ def test_a_run_is_not_resumed_under_other_solver_settings(tmp_path, monkeypatch)
     assert APGTrainer(apg_cfg(epochs=1), tmp_path, progress=False, eval_starts=STARTS[:1]).epoch == 1
 
 
+def test_a_run_is_not_resumed_under_other_dynamics(tmp_path, monkeypatch):
+    """Same settings and scene, but the steps or the loss come out different (another build of
+    the simulator, an edited task): the dynamics probe's hash refuses the resume."""
+    from diffcloth_gym.envs.flying_napkin_v0 import FlyingNapkinTask
+
+    APGTrainer(apg_cfg(epochs=1), tmp_path, progress=False, eval_starts=STARTS[:1]).train()
+    loss_terms = FlyingNapkinTask.loss_terms
+    monkeypatch.setattr(FlyingNapkinTask, "loss_terms",
+                        lambda self, *a: {k: 2 * t for k, t in loss_terms(self, *a).items()})
+    with pytest.raises(ValueError, match="other dynamics"):
+        APGTrainer(apg_cfg(epochs=1), tmp_path, progress=False, eval_starts=STARTS[:1])
+    monkeypatch.undo()
+    assert APGTrainer(apg_cfg(epochs=1), tmp_path, progress=False, eval_starts=STARTS[:1]).epoch == 1
+
+
 def test_compare_writes_results_and_marks_a_stopped_run_partial(tmp_path):
     import json
 

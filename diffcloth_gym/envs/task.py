@@ -84,6 +84,12 @@ class ClothTask(abc.ABC):
     def sample_start(self, rng: np.random.Generator) -> Start:
         """A random start (``reset(seed=...)``)."""
 
+    def probe_start(self) -> Start:
+        """The start of the short episode that fingerprints a training run's dynamics
+        (``training.runlog.dynamics_probe``): one that reaches the task's contacts early
+        where the task's random starts do not. Default: the random start of seed 0."""
+        return self.sample_start(np.random.default_rng(0))
+
     @abc.abstractmethod
     def start(self, spec: Any) -> Start:
         """The start named by ``reset(options={"start": spec})``; raises ``InputError`` for a

@@ -11,6 +11,8 @@ import hashlib
 import json
 import os
 import random
+import warnings
+import weakref
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -86,9 +88,14 @@ def set_rng_states(states: Mapping[str, Any]) -> None:
 
 
 def physics_fingerprint(engine: Any) -> dict[str, Any]:
-    """What a run's simulated steps depend on besides its own config: the env's solver settings
-    and a hash of its physics (mesh, masses, parameters, effects, obstacles, contact response).
-    Paths are left out, so a checkout elsewhere resumes the same run."""
+    """What a run's simulated steps depend on besides its own config: the env's solver settings,
+    a hash of its physics (mesh, masses, parameters, effects, obstacles, contact response) and
+    ``dynamics``, a hash of a short seeded episode (:func:`dynamics_probe`), which also changes
+    with the simulator's code or the task's loss. Paths are left out, so a checkout elsewhere
+    resumes the same run. Computed once per engine."""
+    cached = _FINGERPRINTS.get(engine)
+    if cached is not None:
+        return cached
     sim, scene = engine.template, engine.scene
     h = hashlib.sha1()
     for a in (sim.rest_positions, sim.masses, sim.triangles):
@@ -96,7 +103,46 @@ def physics_fingerprint(engine: Any) -> dict[str, Any]:
     h.update(json.dumps({"params": sim.params(), "effects": sim.effects, "handles": sim.attachment_nodes,
                          **{k: scene.get(k) for k in ("obstacles", "contact", "self_collision")}},
                         sort_keys=True, default=str).encode())
-    return {"solver": sim.solver(), "physics": h.hexdigest()}
+    fingerprint = {"solver": sim.solver(), "physics": h.hexdigest(), "dynamics": dynamics_probe(engine)}
+    _FINGERPRINTS[engine] = fingerprint
+    return fingerprint
+
+
+_FINGERPRINTS: "weakref.WeakKeyDictionary[Any, dict[str, Any]]" = weakref.WeakKeyDictionary()
+
+#: Steps of :func:`dynamics_probe`'s episode.
+PROBE_STEPS = 20
+
+
+def dynamics_probe(engine: Any, steps: int = PROBE_STEPS) -> str:
+    """SHA-1 of the states and loss terms of one episode from the task's ``probe_start`` under
+    seeded random actions, simulated apart from the engine with its scene and solver
+    settings. Settings and physics hashes cannot see a new build whose solver takes another
+    path to the same tolerance (session 11's contact sweeps): its trajectories differ at the
+    tolerance's level, so a run resumed on it would mix two simulators."""
+    from diffcloth_gym import ConvergenceWarning
+    from diffcloth_gym.simulator import Simulator
+
+    task = engine.task
+    rng = np.random.default_rng(0)
+    start = task.probe_start()
+    sim = Simulator.from_config(engine.scene)
+    sim.reset(x=start.x, v=start.v)
+    control = torch.as_tensor(start.control, dtype=torch.float64).reshape(1, -1, 3)
+    h = hashlib.sha1()
+    # Steps stopped at the iteration cap are part of what the hash sees, not news to the user.
+    with torch.no_grad(), warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        for step in range(1, steps + 1):
+            action = torch.from_numpy(rng.uniform(-task.action_bound, task.action_bound, (1, task.action_dim)))
+            control, drive = task.drive(control, action)
+            sim.step(attachment_targets=None if drive.targets is None else drive.targets[0].numpy(),
+                     external_forces=None if drive.forces is None else drive.forces[0].numpy())
+            x, v = torch.from_numpy(sim.positions)[None], torch.from_numpy(sim.velocities)[None]
+            h.update(x.numpy().tobytes() + v.numpy().tobytes())
+            for term in task.loss_terms(x, v, control, step).values():
+                h.update(term.numpy().tobytes())
+    return h.hexdigest()
 
 
 def check_physics(checkpoint: Mapping[str, Any], engine: Any, where: Path) -> None:
@@ -105,7 +151,11 @@ def check_physics(checkpoint: Mapping[str, Any], engine: Any, where: Path) -> No
     saved, now = checkpoint.get("physics"), physics_fingerprint(engine)
     if saved is None or saved == now:
         return
-    what = (f"solver settings {saved['solver']} -> {now['solver']}" if saved["solver"] != now["solver"]
-            else "the scene's physics (mesh, parameters or obstacles)")
+    if saved["solver"] != now["solver"]:
+        what = f"solver settings {saved['solver']} -> {now['solver']}"
+    elif saved["physics"] != now["physics"]:
+        what = "scene physics (mesh, parameters or obstacles)"
+    else:  # older checkpoints have no dynamics hash: they cannot show they match
+        what = "dynamics (a short probe episode differs: another simulator build or task loss)"
     raise ValueError(f"{where}: its checkpoint was simulated with other {what}; use another run folder "
                      "or resume=False (--fresh) to start again")
