@@ -117,10 +117,11 @@ PROBE_STEPS = 20
 def dynamics_probe(engine: Any, steps: int = PROBE_STEPS) -> str:
     """SHA-1 of the states and loss terms of one episode from the task's ``probe_start`` under
     seeded random actions, simulated apart from the engine with its scene and solver
-    settings. Settings and physics hashes cannot see a new build whose solver takes another
-    path to the same tolerance (session 11's contact sweeps): its trajectories differ at the
-    tolerance's level, so a run resumed on it would mix two simulators."""
-    from diffcloth_gym import ConvergenceWarning
+    settings, and of the gradient of a seeded linear loss on its states (the adjoint: what
+    APG and SHAC learn from). Settings and physics hashes cannot see a new build whose solver
+    takes another path to the same tolerance (session 11's contact sweeps): its trajectories
+    and gradients differ at the tolerance's level, so a run resumed on it would mix two
+    simulators."""
     from diffcloth_gym.simulator import Simulator
 
     task = engine.task
@@ -128,11 +129,13 @@ def dynamics_probe(engine: Any, steps: int = PROBE_STEPS) -> str:
     start = task.probe_start()
     sim = Simulator.from_config(engine.scene)
     sim.reset(x=start.x, v=start.v)
+    sim.set_recording(True)
     control = torch.as_tensor(start.control, dtype=torch.float64).reshape(1, -1, 3)
     h = hashlib.sha1()
-    # Steps stopped at the iteration cap are part of what the hash sees, not news to the user.
+    # Steps stopped at the iteration cap (and what the adjoint says of them) are part of what
+    # the hash sees, not news to the user.
     with torch.no_grad(), warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.simplefilter("ignore")
         for step in range(1, steps + 1):
             action = torch.from_numpy(rng.uniform(-task.action_bound, task.action_bound, (1, task.action_dim)))
             control, drive = task.drive(control, action)
@@ -142,6 +145,11 @@ def dynamics_probe(engine: Any, steps: int = PROBE_STEPS) -> str:
             h.update(x.numpy().tobytes() + v.numpy().tobytes())
             for term in task.loss_terms(x, v, control, step).values():
                 h.update(term.numpy().tobytes())
+        weights = rng.normal(0.0, 1.0, (steps, sim.num_nodes, 3))
+        grads = sim.backward(dl_dx=weights)
+    for key in ("x0", "v0", "attachment_targets", "external_forces"):
+        if grads.get(key) is not None:
+            h.update(np.ascontiguousarray(grads[key]).tobytes())
     return h.hexdigest()
 
 
