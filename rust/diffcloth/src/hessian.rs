@@ -160,14 +160,9 @@ impl StepHessian {
         self.pattern.fits(model)
     }
 
-    /// Assembles `H = P (x) I_3 - dP` from a linearization and factors it; false (and no
-    /// usable factor) if it is not numerically positive definite.
-    pub(crate) fn factor(&mut self, model: &Model, lin: &[Vec<f64>]) -> bool {
-        self.assemble(model, lin);
-        self.factorize()
-    }
-
-    /// Factors `Q H Q + sum_j w_j Pi_j` instead: per constrained node `(j, Pi_j, w_j)` the
+    /// Assembles `H = P (x) I_3 - dP` from a linearization and factors `Q H Q + sum_j w_j Pi_j`
+    /// (just `H` without constraints); false (and no usable factor) if that is not numerically
+    /// positive definite. Per constrained node `(j, Pi_j, w_j)` the
     /// projector `Pi_j` onto its constrained directions (`Q = I - Pi` per node, identity
     /// elsewhere) and a weight. The constrained directions decouple from the rest, which is
     /// how the contact Newton eliminates stick and normal directions (`contact_newton.rs`).

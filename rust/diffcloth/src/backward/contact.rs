@@ -30,6 +30,9 @@ pub(crate) struct ContactLin {
     pub(super) gap: f64,
     pub(super) obstacle: Option<usize>,
     pub(super) obstacle_velocity: Vec3,
+    /// The branch and the contact normal (what the law pins: `pinned_directions`).
+    pub(crate) branch: Branch,
+    pub(crate) normal: Vec3,
 }
 
 impl ContactLin {
@@ -127,9 +130,47 @@ pub(crate) fn linearize_contacts_at(
             gap: c.gap,
             obstacle,
             obstacle_velocity: c.obstacle_velocity,
+            branch: c.branch,
+            normal: n,
         });
     }
     Ok(out)
+}
+
+/// The directions the contact law pins at a step, as `(node, projector, m / h^2)` into `out`:
+/// every direction of a node sticking to an obstacle, the normal of one slipping, for nodes in
+/// exactly one active contact (`per_node`: scratch, one zero per node, left zeroed). There the
+/// row of `dF = H - dR` is `m / h^2` times the projector, so a preconditioner can solve those
+/// directions exactly (the forward's contact Newton and the adjoint's factored solve). Nodes
+/// in several contacts, and cloth pairs, are left to the Krylov solver.
+pub(crate) fn pinned_directions(
+    contacts: &[ContactLin],
+    mass: &[f64],
+    h: f64,
+    per_node: &mut [u32],
+    out: &mut Vec<(usize, Matrix3<f64>, f64)>,
+) {
+    for c in contacts {
+        for &(k, _) in &c.e {
+            per_node[k] += if c.obstacle.is_some() { 1 } else { 2 };
+        }
+    }
+    out.clear();
+    for c in contacts.iter().filter(|c| c.obstacle.is_some()) {
+        let node = c.e[0].0;
+        if per_node[node] == 1 {
+            let pi = match c.branch {
+                Branch::Stick => Matrix3::identity(),
+                _ => c.normal * c.normal.transpose(),
+            };
+            out.push((node, pi, mass[node] / (h * h)));
+        }
+    }
+    for c in contacts {
+        for &(k, _) in &c.e {
+            per_node[k] = 0;
+        }
+    }
 }
 
 /// Contacts that share nodes are solved jointly by projected Gauss-Seidel in the forward pass:

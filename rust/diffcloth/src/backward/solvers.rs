@@ -233,8 +233,10 @@ impl Simulator {
         }
         let mut spent = 0;
         // The step's own contact-free H, factored, where P preconditions badly.
-        let factored =
-            work.factored.wanted() && work.factored.factor(&**self.model(), &op.lin.per_set);
+        let factored = work.factored.wanted()
+            && work
+                .factored
+                .factor(&**self.model(), &op.lin.per_set, &op.contacts);
         work.factored.used = factored;
         if op.contacts.is_empty() {
             match self.pcg(op, g, z, options, work, factored) {
@@ -269,7 +271,7 @@ impl Simulator {
             bicgstab(
                 out_col.rb_mut(),
                 IdentityPrecond { dim: 3 * n },
-                by_factor.as_precond(),
+                by_factor.as_precond(&**self.model(), &op.lin.per_set),
                 op,
                 rhs.as_ref(),
                 params,

@@ -25,7 +25,9 @@
 use super::pd::Buffer;
 use super::safeguards::Progress;
 use super::{Model, Simulator};
-use crate::backward::contact::{linearize_contacts_at, ContactCoupling, ContactLin};
+use crate::backward::contact::{
+    linearize_contacts_at, pinned_directions, ContactCoupling, ContactLin,
+};
 use crate::contact::{Branch, ContactKind};
 use crate::gmres::Gmres;
 use crate::hessian::StepHessian;
@@ -245,7 +247,6 @@ impl Simulator {
         for (f, t) in cn.f.iter_mut().zip(&cn.t) {
             *f -= t;
         }
-        self.eliminated_directions(h);
         let contacts = &self.work.contacts;
         let lin = linearize_contacts_at(
             self,
@@ -267,6 +268,16 @@ impl Simulator {
         };
         let cn = &mut w.contact_newton;
         cn.contacts = lin;
+        if cn.per_node.len() != n {
+            cn.per_node = vec![0; n];
+        }
+        pinned_directions(
+            &cn.contacts,
+            &model.mass,
+            h,
+            &mut cn.per_node,
+            &mut cn.constraints,
+        );
         cn.groups.clear();
         cn.groups.extend(
             coupling
@@ -314,53 +325,5 @@ impl Simulator {
         self.profile.contact_newton_krylov_iterations += iterations as u64;
         cn.reuse = iterations <= REFACTOR_KRYLOV && reached <= FORCING;
         cn.d.iter().all(|d| d.iter().all(|c| c.is_finite()))
-    }
-
-    /// The directions the splitting's law pins at the iterate (after its solve): every
-    /// direction of a node in one active contact, a sticking obstacle contact; the normal of
-    /// one slipping. Nodes in several active contacts (or a cloth pair) are left to GMRES.
-    fn eliminated_directions(&mut self, h: f64) {
-        let w = &mut self.work;
-        let cn = &mut w.contact_newton;
-        let mass = &self.model.mass;
-        if cn.per_node.len() != mass.len() {
-            cn.per_node = vec![0; mass.len()];
-        }
-        let active = || {
-            w.contacts
-                .contacts
-                .iter()
-                .filter(|c| c.branch != Branch::TakeOff)
-        };
-        for c in active() {
-            match c.kind {
-                ContactKind::Obstacle { node, .. } => cn.per_node[node] += 1,
-                ContactKind::SelfPair { a, b } => {
-                    cn.per_node[a] += 2;
-                    cn.per_node[b] += 2;
-                }
-            }
-        }
-        cn.constraints.clear();
-        for c in active() {
-            if let ContactKind::Obstacle { node, .. } = c.kind {
-                if cn.per_node[node] == 1 {
-                    let pi = match c.branch {
-                        Branch::Stick => Matrix3::identity(),
-                        _ => c.normal * c.normal.transpose(),
-                    };
-                    cn.constraints.push((node, pi, mass[node] / (h * h)));
-                }
-            }
-        }
-        for c in active() {
-            match c.kind {
-                ContactKind::Obstacle { node, .. } => cn.per_node[node] = 0,
-                ContactKind::SelfPair { a, b } => {
-                    cn.per_node[a] = 0;
-                    cn.per_node[b] = 0;
-                }
-            }
-        }
     }
 }
