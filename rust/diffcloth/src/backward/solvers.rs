@@ -271,7 +271,7 @@ impl Simulator {
             bicgstab(
                 out_col.rb_mut(),
                 IdentityPrecond { dim: 3 * n },
-                by_factor.as_precond(&**self.model(), &op.lin.per_set),
+                by_factor.as_precond(self.model(), &op.lin.per_set),
                 op,
                 rhs.as_ref(),
                 params,
