@@ -1,22 +1,23 @@
 //! The adjoint's factored preconditioner: the sparse Cholesky factor of the step's own
-//! contact-free `H = P - dP` ([`StepHessian`]), for scenes where P preconditions badly.
-//!
-//! On a contact step the adjoint operator is `dF^T`, `dF = H - dR`, and `dR` is not of low
-//! rank where many nodes stick (the Hat on the head: hundreds of contacts, 100-500 BiCGStab
-//! iterations with `H^{-1}`). There the factor is that of `Q H Q` with the directions the
-//! contact law pins eliminated (`pinned_directions`; `Q` projects them out), and the
-//! preconditioner is the transpose of the forward contact Newton's: exact (`dF^{-T}`) when
-//! every contact is a single obstacle contact without friction coupling.
+//! `H = P - dP` ([`StepHessian`]), for scenes where P preconditions badly.
 //!
 //! Where the step objective has soft or non-convex directions (the Hat's curved-rest edge
 //! bending), PCG preconditioned by P needs 110-270 iterations per step at tolerance 1e-10;
-//! with the factor of the step's own `H` it needs one (a contact step's BiCGStab, whose
-//! operator is `H` plus a contact term of low rank, 2-6 instead of 70-110). A factorization
-//! costs about 25 P-preconditioned iterations on the Hat, so it is used only once a
-//! P-preconditioned solve of this pass took more than [`SWITCH_ITERATIONS`] (a count, not a
-//! timing: the choice, and so every bit of the gradient, is the same on every run). The
-//! factor of a neighbouring step does not do: consecutive steps' `H` differ along exactly the
-//! soft directions (measured: 100-270 iterations with the previous step's factor).
+//! with the factor of the step's own `H` it needs one. A factorization costs about 25
+//! P-preconditioned iterations on the Hat, so it is used only once a P-preconditioned solve
+//! of this pass took more than [`SWITCH_ITERATIONS`] (a count, not a timing: the choice, and
+//! so every bit of the gradient, is the same on every run). The factor of a neighbouring step
+//! does not do: consecutive steps' `H` differ along exactly the soft directions (measured:
+//! 100-270 iterations with the previous step's factor).
+//!
+//! On a contact step the adjoint operator is `dF^T`, `dF = H - dR`, and `dR` is not of low
+//! rank where many nodes touch (the Hat on its head: up to 150 slipping contacts, 100-450
+//! BiCGStab iterations with `H^{-1}`). There the factor is that of `Q H Q` with the
+//! directions the contact law pins eliminated (`pinned_directions`; `Q` projects them out),
+//! and the preconditioner is the transpose of the forward contact Newton's: exact (`dF^{-T}`,
+//! one iteration) where every contact sticks to an obstacle alone, 10-40 iterations there
+//! with slipping ones. Eliminating the pinned directions also lets steps factor whose `H` is
+//! indefinite only along them.
 
 use super::contact::{pinned_directions, ContactLin};
 use crate::forward::Model;

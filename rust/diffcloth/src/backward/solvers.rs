@@ -216,8 +216,8 @@ impl Simulator {
     }
 
     /// Krylov solve preconditioned by `P` (or, once P has done badly in this pass, by the
-    /// step's factored contact-free `H`: `factored.rs`): CG while `H` is symmetric (no active
-    /// contact), else (or when CG meets negative curvature) faer's BiCGStab.
+    /// step's factored `H`: `factored.rs`): CG while `H` is symmetric (no active contact),
+    /// else (or when CG meets negative curvature) faer's BiCGStab.
     pub(super) fn krylov(
         &self,
         op: &AdjointOperator<'_>,
@@ -232,7 +232,8 @@ impl Simulator {
             z.iter_mut().for_each(|v| *v = Vec3::zeros());
         }
         let mut spent = 0;
-        // The step's own contact-free H, factored, where P preconditions badly.
+        // The step's own H, factored where P preconditions badly (with the directions its
+        // contacts pin eliminated: `factored.rs`).
         let factored = work.factored.wanted()
             && work
                 .factored
@@ -258,7 +259,7 @@ impl Simulator {
         params.rel_tolerance = options.tolerance;
         params.max_iters = options.max_iterations;
         // Right preconditioning by P (H P^{-1} is close to the identity: dP is small next to
-        // P), or by the contact-free H (the contact term is of low rank).
+        // P), or by the factored H with the pinned directions eliminated (`factored.rs`).
         let SolveWork {
             precond,
             stack,
