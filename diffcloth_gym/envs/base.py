@@ -21,7 +21,8 @@ class ClothEnv(gym.Env):
     - ``render_mode``: None, ``"rgb_array"`` (an HxWx3 uint8 frame from a software rasterizer)
       or, where a display exists, ``"human"`` (a matplotlib window).
     - ``solver``: overrides of the scene's ``[solver]`` table (e.g. ``{"tolerance": 1e-9}``);
-      plain and recorded steps share one tolerance (default ``engine.DEFAULT_TOLERANCE``).
+      plain and recorded steps share one tolerance (default ``engine.DEFAULT_TOLERANCE``) and
+      one iteration cap (default ``engine.DEFAULT_MAX_ITERATIONS``).
     - ``threads``: run the simulator on a thread pool of its own with this many threads
       (default None: rayon's global pool, sized by ``RAYON_NUM_THREADS`` or the core count).
       The trajectory does not depend on it.
