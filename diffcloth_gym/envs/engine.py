@@ -38,8 +38,8 @@ DEFAULT_TOLERANCE = 1e-10
 #: for thousands of PD iterations before it converges; at a cap of 2000 such steps stopped
 #: above the tolerance and, alone, made the Hat's 400-step gradient 1.2e-2 off a 1e-13 one
 #: (`benchmarks/gradient_cost.py`'s case: 5 such steps; 1.3e-6 with all converged, same time).
-#: Measured there and under random effector motion, those steps converge within 2000-8000
-#: iterations; a step that does not converge at all costs the cap.
+#: Measured there and under random effector motion, those steps converged after 2000-3740
+#: iterations, one after 5000-10000; a step that does not converge at all costs the cap.
 DEFAULT_MAX_ITERATIONS = 10000
 
 
