@@ -168,6 +168,13 @@ fn hat_onto_head(mu: f64, steps: usize) -> (Simulator, Vec<StepStats>) {
     (sim, stats)
 }
 
+/// The Krylov gradient equals the sparse-LU one to 1e-8 (relative).
+fn assert_matches_direct(sim: &Simulator, steps: usize, krylov: &diffcloth::Gradients) {
+    let direct = gradients(sim, steps, AdjointSolver::Direct);
+    let err = relative_error(&flat(krylov), &flat(&direct));
+    assert!(err < 1e-8, "vs the direct solve: relative error {err:.2e}");
+}
+
 fn relative_error(a: &[f64], b: &[f64]) -> f64 {
     let norm = b.iter().map(|x| x * x).sum::<f64>().sqrt();
     a.iter()
@@ -201,9 +208,7 @@ fn sticking_contact_steps_take_one_adjoint_iteration() {
     for (s, a) in &sticking {
         assert!(a.iterations <= 1, "{s:?}: {a:?}");
     }
-    let direct = gradients(&sim, steps, AdjointSolver::Direct);
-    let err = relative_error(&flat(&krylov), &flat(&direct));
-    assert!(err < 1e-8, "vs the direct solve: relative error {err:.2e}");
+    assert_matches_direct(&sim, steps, &krylov);
 }
 
 /// The shipped head friction (0.1): up to 150 slipping contacts a step. Measured 10-42
@@ -226,7 +231,5 @@ fn slipping_contact_steps_converge_in_few_adjoint_iterations() {
             "{s:?}: {a:?}"
         );
     }
-    let direct = gradients(&sim, steps, AdjointSolver::Direct);
-    let err = relative_error(&flat(&krylov), &flat(&direct));
-    assert!(err < 1e-8, "vs the direct solve: relative error {err:.2e}");
+    assert_matches_direct(&sim, steps, &krylov);
 }
