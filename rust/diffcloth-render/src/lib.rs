@@ -12,12 +12,14 @@
 //! A crate of its own rather than a module of `diffcloth`: drawing is not physics, the
 //! simulator crate stays free of it, and the binding is the only user.
 //!
-//! ```no_run
+//! ```
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
-//! # let sim: diffcloth::Simulator = unimplemented!();
 //! use diffcloth_render::{Renderer, SceneView};
+//! let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../diffcloth_gym/configs/wind.toml");
+//! let sim = diffcloth::Simulator::from_toml_file(std::path::Path::new(path))?;
 //! let mut renderer = Renderer::new(480, 480)?;
 //! let frame: Vec<u8> = renderer.render_to_vec(&SceneView::of(&sim), None)?;
+//! assert_eq!(frame.len(), 480 * 480 * 3);
 //! # Ok(()) }
 //! ```
 
