@@ -204,16 +204,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--settings", nargs="*", default=list(SETTINGS), choices=list(SETTINGS))
     p.add_argument("--quick", action="store_true", help="20 steps per scene")
     p.add_argument("--out", default=None)
+    p.add_argument("--note", default="", help="what this run measures (kept with its rows: the build, the machine's load)")
     args = p.parse_args(argv)
     notes = (__doc__.split("\n\n", 1)[1].split("Writes")[0].strip().replace("\n", " ")
              + " Target (issue 15): Hat forward + backward <= 5 ms/step at grad_err <= 1e-3.")
     new = []
+    run = results_io.meta({"label": args.label, "scenes": args.scenes, "note": args.note})
     for make in cases(args.scenes, args.quick):
         new += measure(make(), args.label, args.settings)
         # Written after every scene: a long run stopped early keeps what it measured.
         out = results_io.write_merged("gradient_cost", new, lambda r: (r.get("label"), r.get("scene")),
-                                      results_io.meta({"label": args.label, "scenes": args.scenes}),
-                                      "Gradient cost per step", notes, out_dir=args.out)
+                                      run, "Gradient cost per step", notes, out_dir=args.out)
     print(results_io.markdown_table(new))
     print(f"wrote {out}")
     return 0

@@ -116,18 +116,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--variants", nargs="*", default=list(VARIANTS), choices=list(VARIANTS))
     p.add_argument("--polish", default="none", choices=POLISHES)
     p.add_argument("--out", default=None)
+    p.add_argument("--note", default="", help="what this run measures (kept with its rows: the build, the machine's load)")
     args = p.parse_args(argv)
     notes = __doc__.split("\n\n", 1)[1].split("Writes")[0].strip().replace("\n", " ")
     rows = []
+    run = results_io.meta({"scenes": args.scenes, "horizons": args.horizons, "note": args.note})
     key = lambda r: (r.get("scene"), r.get("variant"), r.get("polish"), r.get("steps"))
     for scene in args.scenes:
         for variant in args.variants:
             for steps in args.horizons:
                 rows.append(measure(scene, variant, steps, args.polish))
                 # Rows of earlier runs (other scenes, variants or horizons) are kept.
-                out = results_io.write_merged("gradient_horizon", rows, key,
-                                              results_io.meta({"scenes": args.scenes, "horizons": args.horizons}),
-                                              "Gradient horizon", notes, out_dir=args.out)
+                out = results_io.write_merged("gradient_horizon", rows, key, run, "Gradient horizon", notes,
+                                              out_dir=args.out)
     print(results_io.markdown_table(rows))
     print(f"wrote {out}")
     return 0

@@ -85,7 +85,37 @@ def read_rows(name: str, out_dir: Path | None = None) -> list[dict]:
 def write_merged(name: str, rows: list[dict], key, meta_block: dict, title: str, notes: str = "",
                  out_dir: Path | None = None) -> Path:
     """``write`` that keeps the earlier rows whose ``key(row)`` none of ``rows`` has (for
-    studies whose runs measure part of the table, and write after every measurement)."""
+    studies whose runs measure part of the table, and write after every measurement).
+
+    Each run's meta block is kept as long as it has rows: the JSON's ``runs`` maps a run id
+    (``r1``, ``r2``, ...) to its meta, every row names its run in ``run``, and the Markdown
+    lists the runs (command, date, machine, git and the run's ``note``) above the table, so
+    a rerun of one part does not erase where the other rows came from. Rows written before
+    runs were recorded keep the file's last meta as theirs, the best that is known."""
+    path = Path(out_dir or RESULTS_DIR) / f"{name}.json"
+    old_doc = json.loads(path.read_text()) if path.exists() else {}
     done = {key(r) for r in rows}
-    old = [r for r in read_rows(name, out_dir=out_dir) if key(r) not in done]
-    return write(name, old + rows, meta_block, title, notes, out_dir=out_dir)
+    runs = dict(old_doc.get("runs", {}))
+    old = [dict(r) for r in old_doc.get("rows", []) if key(r) not in done]
+    if any("run" not in r for r in old):
+        runs.setdefault("r0", old_doc["meta"])
+        for r in old:
+            r.setdefault("run", "r0")
+    this = next((rid for rid, m in runs.items() if m == meta_block), None)
+    if this is None:
+        this = f"r{1 + max((int(rid[1:]) for rid in runs), default=0)}"
+        runs[this] = meta_block
+    merged = old + [{**r, "run": this} for r in rows]
+    used = {r["run"] for r in merged}
+    runs = {rid: m for rid, m in sorted(runs.items(), key=lambda kv: int(kv[0][1:])) if rid in used}
+    listing = ["Runs (the `run` column):", ""] + [
+        f"- {rid}: `{m['command']}` — {m['date']}, {m.get('cpu', '?')}, git {m.get('git', '?')}"
+        + (f". {m['note']}" if m.get("note") else "")
+        for rid, m in runs.items()
+    ]
+    write(name, merged, meta_block, title, "\n".join(listing) + ("\n\n" + notes.strip() if notes else ""),
+          out_dir=out_dir)
+    doc = json.loads(path.read_text())
+    doc["runs"] = runs
+    path.write_text(json.dumps(doc, indent=1) + "\n")
+    return path
