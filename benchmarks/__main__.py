@@ -6,6 +6,7 @@ hard-case suite; ``--full`` for the full size), ``step_time`` (forward ms/step p
 setting, and the contact scenes), ``backward_time`` (adjoint ms/step per solver), ``gradient_cost``
 (forward + polish + backward ms/step at the envs' accuracy and the gradient's error),
 ``gradient_horizon`` (over how many contact-rich steps a gradient is still the loss's derivative),
+``hat_workloads`` (where Hat-v0's forward time goes under APG, PPO and random actions),
 ``env_throughput`` (env steps/s single and batched, step_grad cost, frames/s), ``render``
 (frames/s of the software renderer; ``render --images`` writes docs/images/) and ``openloop``
 (open-loop optimization: ``openloop fig4``, the paper's Fig. 4; results ``openloop.{json,md}``). Each writes
@@ -28,6 +29,7 @@ STUDIES = {
     "env_throughput": "benchmarks.env_throughput",
     "render": "benchmarks.render",
     "openloop": "benchmarks.openloop",
+    "hat_workloads": "benchmarks.hat_workloads",
 }
 
 
