@@ -63,23 +63,19 @@ def markdown_table(rows: list[dict], columns: list[str] | None = None) -> str:
     return "\n".join(lines)
 
 
-def write(name: str, rows: list[dict], meta_block: dict, title: str, notes: str = "", columns: list[str] | None = None, out_dir: Path | None = None) -> Path:
+def write(name: str, rows: list[dict], meta_block: dict, title: str, notes: str = "", columns: list[str] | None = None, out_dir: Path | None = None,
+          extra: dict | None = None) -> Path:
+    """``name.json`` (``meta``, ``rows`` and the entries of ``extra``) and ``name.md``."""
     out = Path(out_dir or RESULTS_DIR)
     out.mkdir(parents=True, exist_ok=True)
-    (out / f"{name}.json").write_text(json.dumps({"meta": meta_block, "rows": rows}, indent=1) + "\n")
+    doc = {"meta": meta_block, "rows": rows, **(extra or {})}
+    (out / f"{name}.json").write_text(json.dumps(doc, indent=1) + "\n")
     md = [f"# {title}", "", f"`{meta_block['command']}` — {meta_block['date']}, {meta_block['cpu']}, git {meta_block['git']}", ""]
     if notes:
         md += [notes.strip(), ""]
     md.append(markdown_table(rows, columns))
     (out / f"{name}.md").write_text("\n".join(md) + "\n")
     return out / f"{name}.json"
-
-
-def read_rows(name: str, out_dir: Path | None = None) -> list[dict]:
-    """The rows of an earlier ``write(name, ...)``, or [] if there is none (for studies whose
-    runs replace only part of the table)."""
-    path = Path(out_dir or RESULTS_DIR) / f"{name}.json"
-    return json.loads(path.read_text())["rows"] if path.exists() else []
 
 
 def write_merged(name: str, rows: list[dict], key, meta_block: dict, title: str, notes: str = "",
@@ -113,9 +109,5 @@ def write_merged(name: str, rows: list[dict], key, meta_block: dict, title: str,
         + (f". {m['note']}" if m.get("note") else "")
         for rid, m in runs.items()
     ]
-    write(name, merged, meta_block, title, "\n".join(listing) + ("\n\n" + notes.strip() if notes else ""),
-          out_dir=out_dir)
-    doc = json.loads(path.read_text())
-    doc["runs"] = runs
-    path.write_text(json.dumps(doc, indent=1) + "\n")
-    return path
+    return write(name, merged, meta_block, title, "\n".join(listing) + ("\n\n" + notes.strip() if notes else ""),
+                 out_dir=out_dir, extra={"runs": runs})
