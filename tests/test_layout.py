@@ -1,7 +1,9 @@
-"""The README's layout table matches the tracked tree (``git ls-files``): every path it names
-exists, and every top-level entry and every folder directly under ``diffcloth_gym/`` and
-``rust/`` is in it. Folder-level on purpose: files inside ``rust/*/src`` may move freely."""
+"""The README's layout table matches the tracked tree (``git ls-files``; outside a git checkout,
+the files on disk that ``.gitignore`` does not exclude): every path it names exists, and every
+top-level entry and every folder directly under ``diffcloth_gym/`` and ``rust/`` is in it.
+Folder-level on purpose: files inside ``rust/*/src`` may move freely."""
 
+import fnmatch
 import re
 import shutil
 import subprocess
@@ -15,12 +17,33 @@ PATH_SUFFIXES = (".py", ".rs", ".toml", ".md", ".sh", "/")
 
 
 def tracked() -> list[str]:
-    if shutil.which("git") is None:
-        pytest.skip("git is not available")
-    out = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True)
-    if out.returncode != 0:
-        pytest.skip(f"not a git checkout: {out.stderr.strip()}")
-    return out.stdout.splitlines()
+    """``git ls-files``, or :func:`on_disk` where there is no git or no checkout (a source
+    archive): the layout holds either way."""
+    if shutil.which("git") is not None:
+        out = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True)
+        if out.returncode == 0:
+            return out.stdout.splitlines()
+    return on_disk()
+
+
+def on_disk() -> list[str]:
+    """The files under the root that ``.gitignore``'s patterns (this repository uses only
+    names, globs and root-anchored folders) and ``.git`` leave."""
+    patterns = [p.strip() for p in (ROOT / ".gitignore").read_text().splitlines()
+                if p.strip() and not p.startswith("#")]
+
+    def ignored(rel: Path) -> bool:
+        for pattern in patterns:
+            name = pattern.strip("/")
+            if pattern.startswith("/"):
+                if rel.parts[0] == name:
+                    return True
+            elif any(fnmatch.fnmatch(part, name) for part in rel.parts):
+                return True
+        return rel.parts[0] == ".git"
+
+    files = (p.relative_to(ROOT) for p in ROOT.rglob("*") if p.is_file())
+    return sorted(rel.as_posix() for rel in files if not ignored(rel))
 
 
 def layout_rows() -> list[tuple[list[str], list[str]]]:
@@ -66,3 +89,13 @@ def test_the_layout_table_lists_every_top_level_entry_and_package_folder():
         expected |= {"/".join(f.split("/")[:2]) for f in files if f.startswith(parent + "/") and f.count("/") >= 2}
     missing = sorted(expected - listed)
     assert not missing, f"README layout table does not list: {missing}"
+
+
+def test_the_listing_without_git_finds_every_tracked_file_and_nothing_ignored():
+    out = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True) if shutil.which("git") else None
+    if out is None or out.returncode != 0:
+        pytest.skip("no git checkout to compare with (the tests above already list the files on disk)")
+    disk = set(on_disk())
+    git = [f for f in out.stdout.splitlines() if (ROOT / f).is_file()]  # (a deletion not yet committed)
+    assert not [f for f in git if f not in disk], "on_disk() misses tracked files"
+    assert not [f for f in disk if f.startswith((".venv/", "target/", ".git/")) or f.endswith(".pyc")]
