@@ -42,7 +42,7 @@ import torch
 import diffcloth_gym  # noqa: F401  (registers the envs)
 from benchmarks import results_io
 from diffcloth_gym.training.accounting import engine_of
-from diffcloth_gym.training.evaluate import test_starts
+from diffcloth_gym.training.evaluate import as_policy, test_starts
 
 ENV_ID = "DiffCloth/Hat-v0"
 RUNS = results_io.RESULTS_DIR / "hat_controller_runs_v2"
@@ -55,12 +55,7 @@ def apg_actions(checkpoint: Path) -> Callable[[np.ndarray], np.ndarray]:
     ck = torch.load(checkpoint, weights_only=False)
     policy = MLPPolicy(**ck["policy_config"])
     policy.load_state_dict(ck["policy"])
-
-    def act(obs: np.ndarray) -> np.ndarray:
-        with torch.no_grad():
-            return policy(torch.from_numpy(obs)).numpy()
-
-    return act
+    return as_policy(policy)
 
 
 def ppo_actions(checkpoint: Path, seed: int) -> Callable[[np.ndarray], np.ndarray]:

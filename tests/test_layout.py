@@ -16,14 +16,18 @@ ROOT = Path(__file__).resolve().parents[1]
 PATH_SUFFIXES = (".py", ".rs", ".toml", ".md", ".sh", "/")
 
 
+def git_files() -> list[str] | None:
+    """``git ls-files``, or None without git or outside a checkout (a source archive)."""
+    if shutil.which("git") is None:
+        return None
+    out = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True)
+    return out.stdout.splitlines() if out.returncode == 0 else None
+
+
 def tracked() -> list[str]:
-    """``git ls-files``, or :func:`on_disk` where there is no git or no checkout (a source
-    archive): the layout holds either way."""
-    if shutil.which("git") is not None:
-        out = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True)
-        if out.returncode == 0:
-            return out.stdout.splitlines()
-    return on_disk()
+    """The tracked files, or :func:`on_disk` where git cannot say: the layout holds either way."""
+    files = git_files()
+    return on_disk() if files is None else files
 
 
 def on_disk() -> list[str]:
@@ -92,10 +96,10 @@ def test_the_layout_table_lists_every_top_level_entry_and_package_folder():
 
 
 def test_the_listing_without_git_finds_every_tracked_file_and_nothing_ignored():
-    out = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True) if shutil.which("git") else None
-    if out is None or out.returncode != 0:
+    files = git_files()
+    if files is None:
         pytest.skip("no git checkout to compare with (the tests above already list the files on disk)")
     disk = set(on_disk())
-    git = [f for f in out.stdout.splitlines() if (ROOT / f).is_file()]  # (a deletion not yet committed)
+    git = [f for f in files if (ROOT / f).is_file()]  # (a deletion not yet committed)
     assert not [f for f in git if f not in disk], "on_disk() misses tracked files"
     assert not [f for f in disk if f.startswith((".venv/", "target/", ".git/")) or f.endswith(".pyc")]
