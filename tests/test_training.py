@@ -3,6 +3,8 @@ the Hat uses the same code): an APG epoch lowers the training loss on a fixed st
 to end on the batched vector env, evaluation on TEST_STARTS is bitwise repeatable, the time-step
 count equals the steps simulated, and a run killed after a checkpoint resumes bitwise."""
 
+import csv
+
 import numpy as np
 import pytest
 import torch
@@ -101,6 +103,15 @@ def test_ppo_runs_end_to_end_counts_its_steps_and_resumes_bitwise(tmp_path):
     assert r["forward"] == s["forward"]
     for p, q in zip(full.model.policy.parameters(), resumed.model.policy.parameters()):
         assert torch.equal(p, q)
+    # SB3's log keeps the first part's rows (its CSV writer truncates the file it opens).
+    logged = {run: _sb3_log(tmp_path / run) for run in ("full", "part")}
+    assert [row["time/total_timesteps"] for row in logged["part"]] == ["200", "400"]
+    assert [row["rollout/ep_rew_mean"] for row in logged["part"]] == [row["rollout/ep_rew_mean"] for row in logged["full"]]
+
+
+def _sb3_log(run_dir):
+    with (run_dir / "sb3" / "progress.csv").open(newline="") as f:
+        return list(csv.DictReader(f))
 
 
 def test_ppo_killed_between_evaluations_resumes_bitwise_and_a_late_run_does_not_start(tmp_path):
@@ -114,9 +125,15 @@ def test_ppo_killed_between_evaluations_resumes_bitwise_and_a_late_run_does_not_
     part = PPOTrainer(cfg, tmp_path / "part", progress=False, eval_starts=STARTS[:1])
     p = part.train(max_rollouts=1)  # "killed" after the first rollout's checkpoint, before an evaluation
     assert p["num_timesteps"] == 200 and [q["steps"] for q in p["curve"]] == [0] and not p["complete"]
+    # As if killed between the second rollout's log and its checkpoint: the resume redoes it.
+    rows = _sb3_log(tmp_path / "part")
+    assert [row["time/total_timesteps"] for row in rows] == ["200"]
+    with (tmp_path / "part" / "sb3" / "progress.csv").open("a", newline="") as f:
+        csv.DictWriter(f, fieldnames=list(rows[0])).writerow({**rows[0], "time/total_timesteps": "400"})
     resumed = PPOTrainer(cfg, tmp_path / "part", progress=False, eval_starts=STARTS[:1])
     assert resumed.model.num_timesteps == 200
     r = resumed.train()
+    assert [row["time/total_timesteps"] for row in _sb3_log(tmp_path / "part")] == ["200", "400"]
     assert [q["steps"] for q in r["curve"]] == [0, 400]
     assert [q["test_loss"] for q in r["curve"]] == [q["test_loss"] for q in s["curve"]]
     for a, b in zip(full.model.policy.parameters(), resumed.model.policy.parameters()):

@@ -19,6 +19,7 @@ Logs: SB3's own (``sb3/progress.csv``; TensorBoard too when ``tensorboard`` is i
 
 from __future__ import annotations
 
+import csv
 import io
 import time
 import warnings
@@ -198,7 +199,12 @@ class PPOTrainer:
             formats.append("tensorboard")
         except ImportError:
             pass
-        self.model.set_logger(configure(str(self.run_dir / "sb3"), formats))
+        csv_path = self.run_dir / "sb3" / "progress.csv"
+        previous = _csv_rows_up_to(csv_path, self.model.num_timesteps) if csv_path.exists() else None
+        logger = configure(str(self.run_dir / "sb3"), formats)
+        if previous is not None:
+            _continue_csv(logger, *previous)
+        self.model.set_logger(logger)
         self._logger_set = True
 
     def summary(self) -> dict[str, Any]:
@@ -211,6 +217,32 @@ class PPOTrainer:
                 "num_timesteps": self.model.num_timesteps,
                 "paper_steps": paper_count("ppo", None, self.task.horizon, self.counter.forward),
                 "eval_steps": self.eval_steps, **self.clock.state(), **threads()}
+
+
+def _csv_rows_up_to(path: Path, timesteps: int) -> tuple[list[str], list[list[str]]] | None:
+    """A run's earlier SB3 log: header and the rows up to the checkpoint's time steps (a run
+    killed between a rollout's log and its checkpoint logged a rollout it will redo)."""
+    with path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows:
+        return None
+    header, body = rows[0], rows[1:]
+    col = header.index("time/total_timesteps") if "time/total_timesteps" in header else None
+    keep = [r for r in body if col is None or (r[col] != "" and float(r[col]) <= timesteps)]
+    return header, keep
+
+
+def _continue_csv(logger: Any, header: list[str], rows: list[list[str]]) -> None:
+    """SB3's CSV writer opens progress.csv with "w+" (a resumed run would erase its history):
+    write the earlier rows back and give the writer their columns, so its later rows line up
+    (it rewrites the file itself when a row brings new columns)."""
+    from stable_baselines3.common.logger import CSVOutputFormat
+
+    for fmt in logger.output_formats:
+        if isinstance(fmt, CSVOutputFormat):
+            csv.writer(fmt.file, lineterminator="\n").writerows([header, *rows])
+            fmt.file.flush()
+            fmt.keys = list(header)
 
 
 def train_ppo(cfg: Mapping[str, Any] | None = None, run_dir: str | Path | None = None, seed: int = 0,
