@@ -15,8 +15,9 @@ gradient or the reference is wrong, per scene and horizon:
   the loss's exact local derivative; small at 1e-4 too means it also predicts the loss over
   perturbations of that size (what an optimizer's step needs).
 
-Scenes: the sphere drops of ``gradient_cost`` at 24 and 48 nodes a side, and its ``hat`` (carried
-onto the head by its effectors). Variants: ``full`` (the scene as shipped), ``mu0`` (frictionless obstacles), ``noself``
+Scenes: the sphere drops of ``gradient_cost`` at 24 and 48 nodes a side, its ``hat`` (carried
+onto the head by its effectors) and its ``sock`` (Sock-v0's scene, its four effectors dragging
+it from TEST_STARTS[0] onto the foot over 400 steps; the first push on the foot at step ~120). Variants: ``full`` (the scene as shipped), ``mu0`` (frictionless obstacles), ``noself``
 (without self-collision). Solver: the gradient preset (Anderson), cap 20000, with ``--polish``
 (default none; ``env``: the scene's own, Hat-v0's semismooth). Without a polish the Hat is not
 smooth from 50 steps on: at step 35 of one rollout Anderson-PD stops (update below 1e-13) 1e-3
@@ -40,18 +41,19 @@ from typing import Sequence
 import numpy as np
 
 from benchmarks import results_io
-from benchmarks.gradient_cost import Case, gradient, hat_case, rollout, sphere_case
+from benchmarks.gradient_cost import Case, gradient, hat_case, rollout, sock_case, sphere_case
 from diffcloth_gym import Simulator
 
 SOLVER = dict(preset="gradient", max_iterations=20000, record_max_iterations=20000)
 #: ``env``: each scene's own polish (Hat-v0's semismooth; newton for the spheres).
 POLISHES = ("none", "newton", "semismooth", "env")
-SCENES = {"sphere24x24": 24, "sphere48x48": 48, "hat": None}
+SCENES = {"sphere24x24": 24, "sphere48x48": 48, "hat": None, "sock": None}
 VARIANTS = ("full", "mu0", "noself")
 
 
 def variant_case(scene: str, variant: str, steps: int) -> Case:
-    case = hat_case(steps) if scene == "hat" else sphere_case(SCENES[scene], steps)
+    makers = {"hat": hat_case, "sock": sock_case}
+    case = makers[scene](steps) if scene in makers else sphere_case(SCENES[scene], steps)
     cfg = copy.deepcopy(case.cfg)
     if variant == "mu0":
         for obstacle in cfg["obstacles"]:
