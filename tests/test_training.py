@@ -203,3 +203,31 @@ def test_compare_writes_results_and_marks_a_stopped_run_partial(tmp_path):
     assert r["partial"] and "PARTIAL" in md and "Resume with `resume-here`" in md
     assert [s["curve"] == [] for s in r["runs"]] == [False, False, True, True]
     assert md.count("| not started |") == 2 and r["per_method"]["apg"]["seeds"] == 2
+
+
+def test_compare_reports_the_ratio_in_both_counts_and_the_evaluations_resolution():
+    """APG reaches 1.1x its final loss at 80,000 counted steps (4,000 in the paper's count, one
+    rollout of 20 per epoch) and PPO at 128,000: 1.6x counted, 32x the paper's way."""
+    from diffcloth_gym.training import compare
+
+    def run(method, points, **kw):
+        curve = [{"steps": s, "paper_steps": p, "test_loss": loss} for s, p, loss in points]
+        return {"method": method, "seed": 0, "curve": curve, "final_test_loss": curve[-1]["test_loss"],
+                "success_rate": 0.1, "complete": True, "forward": curve[-1]["steps"],
+                "paper_steps": curve[-1]["paper_steps"], "backward": 0, "train_s": 1.0, "eval_s": 1.0, **kw}
+
+    apg = run("apg", [(0, 0, 1800.0), (40_000, 2_000, 1300.0), (80_000, 4_000, 1100.0)])
+    ppo = run("ppo", [(0, 0, 1850.0), (64_000, 64_000, 1500.0), (128_000, 128_000, 1200.0)])
+    budget = {**NAPKIN, "eval_stride": 10}
+    r = compare.summarize(budget, "tiny", [apg, ppo], [0], ["apg", "ppo"])
+    assert r["target_loss_1.1x_apg"] == pytest.approx(1210.0)
+    assert r["ppo_over_apg_steps_to_target"] == pytest.approx(1.6)
+    assert r["ppo_over_apg_paper_steps_to_target"] == pytest.approx(32.0)
+    assert [m["eval_interval"] for m in r["per_method"].values()] == [40_000, 64_000]
+    md = compare.markdown({**r, "wall_s": 1.0}, "x")
+    assert "| 80,000 (4,000) |" in md and "| 128,000 |" in md
+    assert "1.6x counted, 32.0x in the paper's count" in md and "every 40,000 (APG), 64,000 (PPO)" in md
+    # PPO not there yet in a partial run: said so, not as a missed target.
+    short = run("ppo", [(0, 0, 1850.0), (64_000, 64_000, 1500.0)], complete=False)
+    md = compare.markdown({**compare.summarize(budget, "tiny", [apg, short], [0], ["apg", "ppo"]), "wall_s": 1.0}, "x")
+    assert "n/a (a method did not reach it yet: the run is partial)" in md and "| not reached |" in md
