@@ -57,3 +57,53 @@ pub fn max_distance(a: &[Vec3], b: &[Vec3]) -> f64 {
         .map(|(p, q)| (p - q).norm())
         .fold(0.0, f64::max)
 }
+
+/// Smallest signed distance of a node to obstacle 0 at the simulator's time.
+pub fn min_obstacle_distance(sim: &Simulator) -> f64 {
+    let o = &sim.obstacles()[0];
+    sim.positions()
+        .iter()
+        .map(|p| o.query(p, sim.time()).0)
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// A 4x4 patch (0.3 m square, k_stretch 60, external forces on) against `obstacle` with
+/// friction `mu`. `response`: how the forward solves the contact law; `polish`: what finishes a
+/// step. Tolerance 0 with a cap of 300: no stopping test, so a rollout is a smooth function of
+/// its inputs (finite differences see no jumps).
+pub fn patch_on_obstacle(
+    obstacle: &str,
+    mu: f64,
+    placement: &str,
+    response: &str,
+    polish: &str,
+) -> Simulator {
+    sim_from_toml(&format!(
+        r#"
+h = 0.01
+effects = ["gravity", "stretch", "obstacle_contact", "friction", "external_forces"]
+[mesh]
+kind = "grid"
+rows = 4
+cols = 4
+width = 0.3
+height = 0.3
+plane = "xz"
+[placement]
+{placement}
+[material]
+density = 0.2
+k_stretch = 60.0
+[contact]
+thickness = 0.01
+response = "{response}"
+[[obstacles]]
+mu = {mu}
+shape = {obstacle}
+[solver]
+tolerance = 0.0
+max_iterations = 300
+polish = "{polish}"
+"#
+    ))
+}

@@ -133,14 +133,6 @@ max_iterations = 3000
 const SPHERE: &str = r#"{ kind = "sphere", center = [0.0, 0.0, 0.0], radius = 0.5 }"#;
 const PLANE: &str = r#"{ kind = "plane", point = [0.0, 0.5, 0.0], normal = [0.0, 1.0, 0.0] }"#;
 
-fn min_distance(sim: &Simulator) -> f64 {
-    let o = &sim.obstacles()[0];
-    sim.positions()
-        .iter()
-        .map(|p| o.query(p, sim.time()).0)
-        .fold(f64::INFINITY, f64::min)
-}
-
 fn kinetic(sim: &Simulator) -> f64 {
     sim.velocities()
         .iter()
@@ -160,7 +152,7 @@ fn napkin_on_a_sphere_and_a_plane_never_penetrates_and_comes_to_rest() {
         // 3e-4/1.3e-4/2e-5/9e-7), so 400 steps measured how long the settling takes.
         for step in 0..600 {
             sim.step(StepInput::default()).unwrap();
-            let d = min_distance(&sim);
+            let d = min_obstacle_distance(&sim);
             assert!(
                 d > -thickness,
                 "{shape}: node {d} below the surface at step {step}"
@@ -370,7 +362,7 @@ fn napkin_in_a_bowl_keeps_its_area() {
         let ratio = area(sim.positions()) / rest;
         lo = lo.min(ratio);
         hi = hi.max(ratio);
-        let d = min_distance(&sim);
+        let d = min_obstacle_distance(&sim);
         assert!(d > -thickness, "step {step}: node {d} inside the bowl");
     }
     assert!(lo >= 0.9 && hi <= 1.1, "area ratio in [{lo}, {hi}]");
@@ -420,7 +412,7 @@ max_iterations = 2000
     for v in sim.velocities() {
         assert!((v - Vec3::new(0.2, 0.5, 0.0)).norm() < 1e-6, "{v:?}");
     }
-    let lowest = min_distance(&sim);
+    let lowest = min_obstacle_distance(&sim);
     assert!(
         (lowest - 0.01).abs() < 1e-6,
         "rides at the contact thickness: {lowest}"

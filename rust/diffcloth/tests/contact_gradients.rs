@@ -4,37 +4,10 @@ use crate::common::*;
 use crate::gradient_check::*;
 use diffcloth::{AdjointSolver, BackwardOptions, Simulator, Vec3};
 
-/// A 4x4 cloth on an obstacle with friction; `v0` chosen so one branch holds everywhere.
-/// A 4x4 patch against `obstacle`. `response`: how the forward solves the contact law; the
-/// adjoint is the same for both (it linearizes the law at the converged step).
+/// The shared 4x4 patch against `obstacle` (`common::patch_on_obstacle`), without a polish;
+/// the adjoint is the same for both responses (it linearizes the law at the converged step).
 fn contact_scene(obstacle: &str, mu: f64, placement: &str, response: &str) -> Simulator {
-    sim_from_toml(&format!(
-        r#"
-h = 0.01
-effects = ["gravity", "stretch", "obstacle_contact", "friction", "external_forces"]
-[mesh]
-kind = "grid"
-rows = 4
-cols = 4
-width = 0.3
-height = 0.3
-plane = "xz"
-[placement]
-{placement}
-[material]
-density = 0.2
-k_stretch = 60.0
-[contact]
-thickness = 0.01
-response = "{response}"
-[[obstacles]]
-mu = {mu}
-shape = {obstacle}
-[solver]
-tolerance = 0.0
-max_iterations = 300
-"#
-    ))
+    patch_on_obstacle(obstacle, mu, placement, response, "none")
 }
 
 fn contact_rollout(sim: &Simulator, v0: Vec<Vec3>, steps: usize, mu: f64, force: f64) -> Rollout {
@@ -74,17 +47,7 @@ fn gradients_through_sticking_contact_match_finite_differences() {
         let mut sim = contact_scene(&shape, 0.6, &placement, response);
         let steps = 10;
         let base = contact_rollout(&sim, vec![Vec3::zeros(); sim.num_nodes()], steps, 0.6, 1e-4);
-        check_all_gradients(
-            &mut sim,
-            &base,
-            steps,
-            &[
-                AdjointSolver::Direct,
-                AdjointSolver::Krylov,
-                AdjointSolver::FixedPoint,
-            ],
-            1.0,
-        );
+        check_all_gradients(&mut sim, &base, steps, &ALL_ADJOINT_SOLVERS, 1.0);
         assert!(sim
             .contacts()
             .iter()
@@ -102,25 +65,10 @@ fn gradients_through_slipping_contact_match_finite_differences() {
         // Sliding downhill and slightly sideways, with some spread between nodes.
         let v0: Vec<Vec3> = random_vectors(n, 0.05, 9)
             .iter()
-            .map(|d| {
-                1.0 * downhill
-                    + Vec3::new(0.0, 0.0, 0.3)
-                    + Vec3::new(d.x, d.y, d.z) * 0.0
-                    + Vec3::new(0.0, 0.0, d.z)
-            })
+            .map(|d| 1.0 * downhill + Vec3::new(0.0, 0.0, 0.3) + Vec3::new(0.0, 0.0, d.z))
             .collect();
         let base = contact_rollout(&sim, v0, steps, 0.3, 1e-3);
-        check_all_gradients(
-            &mut sim,
-            &base,
-            steps,
-            &[
-                AdjointSolver::Direct,
-                AdjointSolver::Krylov,
-                AdjointSolver::FixedPoint,
-            ],
-            1.0,
-        );
+        check_all_gradients(&mut sim, &base, steps, &ALL_ADJOINT_SOLVERS, 1.0);
         assert!(sim
             .contacts()
             .iter()
@@ -141,17 +89,7 @@ fn gradients_through_slipping_contact_on_a_sphere_match_finite_differences() {
             .map(|d| Vec3::new(0.8, -0.1, 0.3) + d)
             .collect();
         let base = contact_rollout(&sim, v0, steps, 0.2, 1e-3);
-        check_all_gradients(
-            &mut sim,
-            &base,
-            steps,
-            &[
-                AdjointSolver::Direct,
-                AdjointSolver::Krylov,
-                AdjointSolver::FixedPoint,
-            ],
-            1.0,
-        );
+        check_all_gradients(&mut sim, &base, steps, &ALL_ADJOINT_SOLVERS, 1.0);
         let active = sim
             .contacts()
             .iter()

@@ -165,38 +165,17 @@ fn contact_newton_is_one_trajectory_recorded_or_not_on_one_or_two_threads() {
     assert!(plain == run(false, 2), "two threads differ from one");
 }
 
-/// A 4x4 patch sliding (mu 0.2) or sticking (mu 1) on a sphere of radius 1, as in
-/// `contact_gradients.rs`, with contact Newton. Tolerance 0 with a cap: no stopping test, so
-/// the rollout is a smooth function of its inputs.
+/// A 4x4 patch sliding (mu 0.2) on a sphere of radius 1, as in `contact_gradients.rs`, with
+/// contact Newton.
 fn patch_on_sphere(response: &str) -> Simulator {
-    sim_from_toml(&format!(
-        r#"
-h = 0.01
-effects = ["gravity", "stretch", "obstacle_contact", "friction", "external_forces"]
-[mesh]
-kind = "grid"
-rows = 4
-cols = 4
-width = 0.3
-height = 0.3
-plane = "xz"
-[placement]
-translate = [0.2, 1.01, 0.1]
-[material]
-density = 0.2
-k_stretch = 60.0
-[contact]
-thickness = 0.01
-response = "{response}"
-[[obstacles]]
-mu = 0.2
-shape = {{ kind = "sphere", center = [0.0, 0.0, 0.0], radius = 1.0 }}
-[solver]
-tolerance = 0.0
-max_iterations = 300
-polish = "semismooth"
-"#
-    ))
+    let sphere = r#"{ kind = "sphere", center = [0.0, 0.0, 0.0], radius = 1.0 }"#;
+    patch_on_obstacle(
+        sphere,
+        0.2,
+        "translate = [0.2, 1.01, 0.1]",
+        response,
+        "semismooth",
+    )
 }
 
 /// Gradients through contact Newton steps, slipping and sticking, match central differences.

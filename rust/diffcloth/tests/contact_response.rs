@@ -44,14 +44,6 @@ max_iterations = {max_iterations}
     ))
 }
 
-fn min_distance(sim: &Simulator) -> f64 {
-    let o = &sim.obstacles()[0];
-    sim.positions()
-        .iter()
-        .map(|p| o.query(p, sim.time()).0)
-        .fold(f64::INFINITY, f64::min)
-}
-
 #[test]
 fn both_responses_solve_the_same_step() {
     // From the same states along a drop (take-off, stick and slip all occur), one converged
@@ -100,7 +92,7 @@ fn stiff_cloth_at_large_steps_stays_outside_the_obstacle() {
         // These steps stop at the cap (PD itself converges slowly here: residual ~1e-4), and a
         // node found late by re-detection may end a little inside the layer: 1 % of it is
         // allowed (the inertia response ended 0.17 m inside the sphere).
-        let d = min_distance(&sim);
+        let d = min_obstacle_distance(&sim);
         assert!(
             d >= 0.99 * thickness,
             "step {step}: a node is {d} from the sphere (thickness {thickness}): {stats:?}"

@@ -96,6 +96,13 @@ pub(crate) fn check(name: &str, analytic: f64, fd: f64) {
     );
 }
 
+/// Every adjoint solver, each checked against the direct one.
+pub(crate) const ALL_ADJOINT_SOLVERS: [AdjointSolver; 3] = [
+    AdjointSolver::Direct,
+    AdjointSolver::Krylov,
+    AdjointSolver::FixedPoint,
+];
+
 /// Checks every gradient group by a directional central difference.
 pub(crate) fn check_all_gradients(
     sim: &mut Simulator,

@@ -64,17 +64,7 @@ max_iterations = 150
         params: sim.params().clone(),
         mu: None,
     };
-    check_all_gradients(
-        &mut sim,
-        &base,
-        steps,
-        &[
-            AdjointSolver::Direct,
-            AdjointSolver::Krylov,
-            AdjointSolver::FixedPoint,
-        ],
-        1.0,
-    );
+    check_all_gradients(&mut sim, &base, steps, &ALL_ADJOINT_SOLVERS, 1.0);
 }
 
 /// A shipped garment scene without its contact effects, solved with a fixed iteration count.

@@ -2,7 +2,7 @@
 //! obstacle without a word (an 8x8 cloth resting 0.1 m above a sphere ended 1.85 m below its
 //! top after one step of 0.5 s, 38 m after one of 2 s): detection reached only as far as the
 //! entering velocity, zero at rest, and the check after the solve looked at end points only.
-use crate::common::sim_from_toml;
+use crate::common::{min_obstacle_distance, sim_from_toml};
 use diffcloth::{Simulator, StepInput, Vec3};
 
 /// An 8x8 cloth (1 m square) at rest 0.1 m above the top of a sphere of radius 0.5, step `h`;
@@ -45,15 +45,6 @@ max_iterations = 5000
     ))
 }
 
-/// Smallest signed distance of a node to obstacle 0 at the simulator's time.
-fn min_distance(sim: &Simulator) -> f64 {
-    let o = &sim.obstacles()[0];
-    sim.positions()
-        .iter()
-        .map(|p| o.query(p, sim.time()).0)
-        .fold(f64::INFINITY, f64::min)
-}
-
 /// Whether the straight path from `a` to `b` (at times t and t + h) enters obstacle 0.
 fn path_enters(sim: &Simulator, a: &Vec3, b: &Vec3, t: f64, h: f64) -> bool {
     let o = &sim.obstacles()[0];
@@ -72,7 +63,7 @@ fn assert_step_does_not_tunnel(mut sim: Simulator) {
     let t = sim.time();
     match sim.step(StepInput::default()) {
         Ok(_) => {
-            let d = min_distance(&sim);
+            let d = min_obstacle_distance(&sim);
             assert!(
                 d > -thickness,
                 "h = {h}: a node ended {d} m inside the sphere"
