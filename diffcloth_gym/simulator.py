@@ -200,7 +200,7 @@ class Simulator:
 
     def set_solver(self, **settings: Any) -> None:
         """Changes solver settings by name (see :meth:`solver`). ``preset="simulation"``
-        (tolerance 1e-8, cap 300: the default) or ``preset="gradient"`` (1e-11, cap 2000: what
+        (tolerance 1e-8, cap 300: the default) or ``preset="gradient"`` (1e-11, cap 10000: what
         the adjoint needs; 1.1-1.7x the cost of a loss with its gradient) sets tolerance and
         cap, explicit settings override it. A recorded rollout is the same trajectory as an
         unrecorded one with the same settings."""

@@ -53,14 +53,7 @@ def test_gradient_preset_gives_the_converged_gradient(name, mesh):
         assert cos >= 0.99 and rel <= 1e-2, (name, rel, cos)
 
 
-@pytest.mark.parametrize("name, bend_model", [
-    ("sock", None),
-    ("sock", "vertex"),
-    pytest.param("hat", None, marks=pytest.mark.xfail(strict=True, reason=(
-        "open: with the edge bending model (k_bend 120 now means the paper's stiffness) recorded "
-        "Hat steps stop at the gradient preset's iteration cap above 1e-9 (measured on the bend "
-        "branch: 3 of 400, worst 1.8e-8, from step 181)"))),
-])
+@pytest.mark.parametrize("name, bend_model", [("sock", None), ("sock", "vertex"), ("hat", None)])
 def test_full_scenes_with_contact_give_the_converged_gradient(name, bend_model):
     """The full scenes, 400 steps: the Sock with its foot, leg and self-contact (friction in
     every contact branch), the Hat on its head. The Hat buckles against the head at about
@@ -68,15 +61,17 @@ def test_full_scenes_with_contact_give_the_converged_gradient(name, bend_model):
     parted from the 1e-12 one (gradients 0.56 apart); at the default 1e-11 they agree to 3e-3.
     Its friction gradient is checked. With the edge bending model (the default) self-contact
     never pushes on either scene (mu_self is 0); the Sock with the per-vertex model folds
-    onto itself, so that case keeps the self-contact friction gradient checked."""
+    onto itself, so that case keeps the self-contact friction gradient checked. A few Hat steps
+    sit near a saddle for thousands of iterations: at the preset's former cap of 2000 two
+    stopped at 7e-9 (the backward warned), and the 1e-12 reference needs more than 5000."""
     cfg = load_scene(name)
     if bend_model is not None:
         cfg["material"]["bend_model"] = bend_model
     with warnings.catch_warnings():
-        # One Hat step stops at the preset's cap (2000) at 4e-10 (under the trusted 1e-9).
+        # Steps that stop at a cap warn; backward reports any above the trusted 1e-9 (asserted).
         warnings.simplefilter("ignore", ConvergenceWarning)
         default, default_targets = rollout_gradients(cfg, preset="gradient")
-        converged, converged_targets = rollout_gradients(cfg, tolerance=1e-12, max_iterations=5000)
+        converged, converged_targets = rollout_gradients(cfg, tolerance=1e-12, max_iterations=20000)
     assert default["warnings"] == [] and converged["warnings"] == []
     pairs = [(default["v0"], converged["v0"]), (default_targets, converged_targets),
              (default["mu_obstacles"], converged["mu_obstacles"])]

@@ -69,7 +69,7 @@ def test_solver_presets_and_the_retired_record_settings():
     sim = slope()
     assert sim.solver()["tolerance"] == 1e-8 and sim.solver()["max_iterations"] == 300
     sim.set_solver(preset="gradient")
-    assert sim.solver()["tolerance"] == 1e-11 and sim.solver()["max_iterations"] == 2000
+    assert sim.solver()["tolerance"] == 1e-11 and sim.solver()["max_iterations"] == 10000
     sim.set_solver(preset="gradient", tolerance=1e-10)  # explicit settings override the preset
     assert sim.solver()["tolerance"] == 1e-10
     # The envs' way of saying "recorded steps like the others" keeps working ...

@@ -50,9 +50,14 @@ def garment_scene(name: str, steps: int, contact: bool = False, drive: Any = GAR
 
 def gradient_tolerance() -> float:
     """The tolerance of the simulator's ``gradient`` solver preset (what recorded steps need)."""
+    return gradient_preset()["tolerance"]
+
+
+def gradient_preset() -> dict:
+    """The simulator's ``gradient`` solver preset (tolerance and iteration cap)."""
     sim = Simulator.from_config("napkin")
     sim.set_solver(preset="gradient")
-    return sim.solver()["tolerance"]
+    return sim.solver()
 
 
 def make_sim(cfg: dict, **solver: Any) -> Simulator:

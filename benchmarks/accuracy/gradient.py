@@ -8,7 +8,7 @@ from typing import Callable
 
 import numpy as np
 
-from benchmarks.accuracy.common import Scene, gradient_tolerance, make_sim, pyplot, save_plot, table, undisturbed
+from benchmarks.accuracy.common import Scene, gradient_preset, gradient_tolerance, make_sim, pyplot, save_plot, table, undisturbed
 from benchmarks.measures import compare
 
 #: Gradient part: the converged trajectory the gradients are compared with (as
@@ -138,7 +138,8 @@ def gradient_section(rows: list[dict]) -> list[str]:
            "and a smooth-L1 loss to a target shape on every step (as tests/test_gradient_consistency.py); gradients by the "
            "direct (LU) backward, compared with the gradient of a trajectory converged to 1e-12. Recorded steps converge "
            "like unrecorded ones (one trajectory whether recorded or not); `no polish` rows stop at the setting shown, "
-           f"`polish` is the `gradient` solver preset (tolerance {gradient_tolerance():.0e}, cap 2000). Results committed before "
+           f"`polish` is the `gradient` solver preset (tolerance {gradient_tolerance():.0e}, cap "
+           f"{gradient_preset()['max_iterations']}; 2000 before session 14). Results committed before "
            "the retirement of `record_tolerance` show `polish` rows at two plain tolerances with recorded steps converged to "
            "1e-11: the same trajectory as the preset. `fwd ms/step` is measured while recording. `warned` = the "
            "backward's `warnings` was non-empty.", "",

@@ -9,6 +9,7 @@ use super::{AdjointSolver, BackwardOptions, Gradients, TRUSTED_FORWARD_RESIDUAL}
 use crate::cancel::Cancel;
 use crate::error::{Error, Result};
 use crate::forward::Simulator;
+use crate::params::Preset;
 use crate::tape::{StepRecord, Tape};
 use crate::Vec3;
 use std::sync::Mutex;
@@ -270,11 +271,12 @@ impl Simulator {
                 .map(|&(_, r)| r)
                 .fold(0.0, f64::max);
             let first = grads.loose_steps.iter().map(|&(k, _)| k).min().unwrap_or(0);
+            let (tolerance, cap) = Preset::Gradient.accuracy();
             grads.warnings.push(format!(
                 "{} of {steps} recorded steps stopped above the residual {TRUSTED_FORWARD_RESIDUAL:e} (worst {worst:.1e}, first at step {first}): \
                  the adjoint linearizes unconverged steps and the gradient may be inaccurate; record \
-                 with solver preset \"gradient\" (tolerance 1e-11, max_iterations 2000) or a lower \
-                 solver.tolerance",
+                 with solver preset \"gradient\" (tolerance {tolerance:e}, max_iterations {cap}), a lower \
+                 solver.tolerance, or a higher solver.max_iterations if steps stopped at the cap",
                 grads.loose_steps.len()
             ));
         }
