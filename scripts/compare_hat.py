@@ -33,6 +33,9 @@ def main(argv=None):
                    "the results say partial; rerun to resume)")
     p.add_argument("--fresh", action="store_true", help="ignore existing checkpoints")
     p.add_argument("--no-gif", action="store_true")
+    p.add_argument("--via", default=None, help="the command line the user ran, when a wrapper runs this file (e.g. "
+                   "'scripts/hat_full_run --max-minutes 60', which runs the comparison's pinned build): the results "
+                   "name it, and its program as the resume command")
     args = p.parse_args(argv)
     from diffcloth_gym.training import compare
 
@@ -44,6 +47,8 @@ def main(argv=None):
     resume = f"python scripts/compare_hat.py --budget {shlex.quote(args.budget)}"
     if args.runs:
         resume += f" --runs {shlex.quote(args.runs)}"
+    if args.via:
+        command, resume = args.via, shlex.split(args.via)[0]
     return compare.run(budget, out=out, runs=runs, seeds=args.seeds, methods=args.methods,
                        max_minutes=args.max_minutes, resume=not args.fresh, gif=not args.no_gif, command=command.strip(),
                        resume_command=resume + " [--max-minutes M]")

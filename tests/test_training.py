@@ -179,6 +179,7 @@ def test_a_run_is_not_resumed_under_other_dynamics(tmp_path, monkeypatch):
 
 def test_compare_writes_results_and_marks_a_stopped_run_partial(tmp_path):
     import json
+    import re
 
     from diffcloth_gym.training import compare
 
@@ -194,6 +195,8 @@ def test_compare_writes_results_and_marks_a_stopped_run_partial(tmp_path):
     assert not data["partial"] and len(data["test_starts"]) == 2
     assert [s["forward"] for s in data["runs"]] == [2 * HORIZON, 200]
     assert data["runs"][0]["reach_1.1x_apg"] is not None  # APG reaches its own final loss
+    # The build it ran on: a commit (in a git checkout, as here and in CI) or said unknown.
+    assert re.fullmatch(r"[0-9a-f]{12}(-dirty)?|unknown \(not a git checkout\)", data["build"]), data["build"]
     # A deadline already passed: nothing trains, the longer budget is partial, and says so.
     # Seed 1 has no checkpoint: it does not start (not even its first evaluation).
     longer = {**budget, "seeds": [0, 1], "apg": {**budget["apg"], "epochs": 3}}
@@ -224,7 +227,8 @@ def test_compare_reports_the_ratio_in_both_counts_and_the_evaluations_resolution
     assert r["ppo_over_apg_steps_to_target"] == pytest.approx(1.6)
     assert r["ppo_over_apg_paper_steps_to_target"] == pytest.approx(32.0)
     assert [m["eval_interval"] for m in r["per_method"].values()] == [40_000, 64_000]
-    md = compare.markdown({**r, "wall_s": 1.0}, "x")
+    md = compare.markdown({**r, "wall_s": 1.0, "command": "scripts/hat_full_run", "build": "0123abcd"}, "x")
+    assert "Command: `scripts/hat_full_run` (code and simulator: git 0123abcd)" in md
     assert "| 80,000 (4,000) |" in md and "| 128,000 |" in md
     assert "1.6x counted, 32.0x in the paper's count" in md and "every 40,000 (APG), 64,000 (PPO)" in md
     # PPO not there yet in a partial run: said so, not as a missed target.

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import platform
+import subprocess
 import time
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -94,6 +95,7 @@ def run(budget: str | Mapping[str, Any] = "budget_demo", out: str | Path = "out/
     results["wall_s"] = time.perf_counter() - t0
     results["command"] = command
     results["resume_command"] = resume_command
+    results["build"] = source_build()
     out.mkdir(parents=True, exist_ok=True)
     (out / f"{name}.json").write_text(json.dumps(results, indent=1, default=_json))
     plot(results, out / f"{name}.png")
@@ -103,6 +105,26 @@ def run(budget: str | Mapping[str, Any] = "budget_demo", out: str | Path = "out/
         results["gif"] = str(rollout_gif(gif_engine, gif_frames, out / f"{name}.gif"))
     (out / f"{name}.md").write_text(markdown(results, name))
     return results
+
+
+#: What the simulator and the harness are built from (git pathspecs from the repository's top).
+CODE = (":/rust", ":/diffcloth_gym", ":/Cargo.toml", ":/Cargo.lock", ":/pyproject.toml")
+
+
+def source_build() -> str:
+    """The git commit of the code this runs (``-dirty`` with uncommitted changes to the simulator
+    or the package; the run folders beside it always change): a run that spans sessions names
+    the simulator build it was run on."""
+    here = Path(__file__).resolve().parent
+
+    def git(*args: str) -> str:
+        return subprocess.run(["git", "-C", str(here), *args], capture_output=True, text=True,
+                              check=True).stdout.strip()
+
+    try:
+        return git("rev-parse", "--short=12", "HEAD") + ("-dirty" if git("status", "--porcelain", "--", *CODE) else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown (not a git checkout)"
 
 
 def _json(o: Any) -> Any:
@@ -213,7 +235,7 @@ def markdown(results: Mapping[str, Any], name: str) -> str:
         lines += ["**PARTIAL RUN**: at least one run stopped before its budget (checkpointed). "
                   f"Resume with `{r.get('resume_command') or r.get('command') or 'scripts/compare_hat.py'}`.", ""]
     if r.get("command"):
-        lines += [f"Command: `{r['command']}`", ""]
+        lines += [f"Command: `{r['command']}`" + (f" (code and simulator: git {r['build']})" if r.get("build") else ""), ""]
     lines += [f"Evaluated on {len(r['test_starts'])} of the env's TEST_STARTS with deterministic actions; "
               f"target loss = 1.1 x APG's final test loss = {_f(r['target_loss_1.1x_apg'])}.", "",
               "| method | seed | done | final test loss | success | time steps (counted) | paper's count | "
