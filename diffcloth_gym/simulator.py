@@ -108,9 +108,10 @@ class Simulator:
         if missed and self._core.solver()["tolerance"] > 0:
             hint = ""
             active = stats["contacts"]["stick"] + stats["contacts"]["slip"]
-            if active and (self.config.get("contact") or {}).get("response", "inertia") == "inertia":
+            if active and (self.config.get("contact") or {}).get("response", "auto") != "delassus":
                 hint = ("; with stiff cloth at large steps, contact.response = 'delassus' keeps every iterate "
-                        "out of the obstacles")
+                        "out of the obstacles ('auto', the default, switches to it only on steps that stall "
+                        "with few, stiff contacts)")
             warnings.warn(f"{int(missed)} step(s) stopped at the iteration cap above the tolerance (last: residual "
                           f"{stats['residual']:.1e} after {stats['iterations']} iterations){hint}",
                           ConvergenceWarning, stacklevel=2)

@@ -96,14 +96,17 @@ def test_sock_contact_steps_converge_at_the_recording_tolerance():
 
 
 def test_contact_response_is_a_config_choice_with_the_same_physics():
-    """``contact.response``: ``inertia`` (default) or ``delassus``; both land the sphere drop
-    on the same state, the Delassus one reports its operator builds; anything else is refused."""
+    """``contact.response``: ``auto`` (default), ``inertia`` or ``delassus``; all land the
+    sphere drop on the same state, the Delassus one reports its operator builds, and ``auto``
+    (whose soft contacts converge in time) is the splitting bit for bit; anything else is
+    refused."""
     import copy
 
     from diffcloth_gym.scenes import load_scene
     base = load_scene("sphere")
     states = {}
-    for response in ("inertia", "delassus"):
+    assert "response" not in base.get("contact", {})
+    for response in ("auto", "inertia", "delassus"):
         cfg = copy.deepcopy(base)
         cfg["contact"]["response"] = response
         sim = Simulator.from_config(cfg)
@@ -112,7 +115,14 @@ def test_contact_response_is_a_config_choice_with_the_same_physics():
         states[response] = sim.positions
         builds = sim.profile()["delassus_builds"]
         assert (builds > 0) == (response == "delassus")
+        assert sim.profile()["response_switches"] == 0
     assert np.abs(states["inertia"] - states["delassus"]).max() < 1e-7
+    assert np.array_equal(states["auto"], states["inertia"])
+    default = Simulator.from_config({k: v for k, v in base.items() if k != "contact"} | {
+        "contact": {k: v for k, v in base["contact"].items() if k != "response"}})
+    default.set_solver(tolerance=1e-11, max_iterations=5000)
+    default.step(steps=80)
+    assert np.array_equal(default.positions, states["auto"])
     cfg = copy.deepcopy(base)
     cfg["contact"]["response"] = "newton"
     with pytest.raises(ValueError, match="newton"):

@@ -54,19 +54,22 @@ def case_large_step_pinned(size: str, workdir: Path, h: float) -> dict:
     }, ENERGY_BOUND, h_s=h)
 
 
-def case_large_step_sphere(size: str, workdir: Path, h: float, response: str = "inertia") -> dict:
+def case_large_step_sphere(size: str, workdir: Path, h: float, response: str | None = None) -> dict:
     """``sphere.toml`` with stiff material (k_stretch 1e5) and a large step h (1/30 or 1/10 s):
     the cloth falls 0.6 m onto the sphere (friction 0.3, self-collision). Unforced: energy must
     not grow, no node may cross the sphere's surface; impulses stay in the friction cone.
-    ``response``: the contact response (``contact.response``); the default ``inertia`` fails
-    here (issue ``stiff_contact``), ``delassus`` is its fix.
+    ``response``: the contact response (``contact.response``; None: the default, ``auto``).
+    ``inertia`` alone fails here (its splitting stalls and nodes go through the sphere);
+    ``delassus`` holds every iterate to the contact law, and ``auto`` switches to it on the
+    steps that stall on these stiff contacts.
     Full size: 25 x 25 nodes at h = 1/30, 15 x 15 at h = 1/10, where the self-collision
     candidates (reach ``radius + margin + 2 h (|v_a| + |v_b|)``, absolute speeds) grow to
     ~1e5 pairs of the 625 nodes and a step costs a minute."""
     rows = pick(size, 10, 25 if h < 0.05 else 15)
     steps = round(pick(size, 1.5, 3.0) / h)
     cfg = sphere_config(0.3, rows, h=h, k_stretch=1e5)
-    cfg["contact"]["response"] = response
+    if response is not None:
+        cfg["contact"]["response"] = response
     sim = Simulator.from_config(cfg)
     mon = Monitor(energy=True)
     cone = []

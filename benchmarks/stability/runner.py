@@ -37,6 +37,8 @@ CASES: dict[str, Case] = {c.name: c for c in [
     _case("large_step_sphere_h10", cases.case_large_step_sphere, h=1 / 10),
     _case("large_step_sphere_h30_delassus", cases.case_large_step_sphere, h=1 / 30, response="delassus"),
     _case("large_step_sphere_h10_delassus", cases.case_large_step_sphere, h=1 / 10, response="delassus"),
+    _case("large_step_sphere_h30_inertia", cases.case_large_step_sphere, h=1 / 30, response="inertia"),
+    _case("large_step_sphere_h10_inertia", cases.case_large_step_sphere, h=1 / 10, response="inertia"),
     _case("large_step_slope_h30", cases.case_large_step_slope, h=1 / 30),
     _case("large_step_slope_h10", cases.case_large_step_slope, h=1 / 10),
     _case("soft_hanging", cases.case_soft_hanging),

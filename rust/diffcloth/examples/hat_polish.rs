@@ -46,6 +46,7 @@ fn main() {
     let (mut err_max, mut err_sum) = (0.0f64, 0.0);
     let mut errs: Vec<f64> = Vec::new();
     let mut targets: Vec<Vec3> = sim.attachment_targets().to_vec();
+    let mut step_times = Vec::new();
     let t0 = std::time::Instant::now();
     for n in 0..steps {
         for t in targets.iter_mut() {
@@ -62,7 +63,13 @@ fn main() {
             r.step(input).unwrap();
             r.positions().to_vec()
         });
+        let step_start = std::time::Instant::now();
         let st = sim.step(input).unwrap();
+        step_times.push((
+            step_start.elapsed().as_secs_f64(),
+            st.iterations,
+            st.contacts,
+        ));
         if let Some(exact) = exact {
             let e = exact
                 .iter()
@@ -110,6 +117,16 @@ fn main() {
         p.acceleration_rejections as f64 / st,
         p.unconverged_steps
     );
+    // Where the time goes: the slowest tenth of the steps against the rest.
+    step_times.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let total: f64 = step_times.iter().map(|s| s.0).sum();
+    let tenth = (step_times.len() / 10).max(1);
+    let slow: f64 = step_times[..tenth].iter().map(|s| s.0).sum();
+    println!(
+        "  slowest {tenth} steps: {:.0} % of the time; slowest: {:?}",
+        100.0 * slow / total,
+        &step_times[..3.min(step_times.len())]
+    );
     let per = |d: std::time::Duration, n: u64| 1e3 * d.as_secs_f64() / n.max(1) as f64;
     println!(
         "  ms per PD iteration (local+global) {:.4}, per CG iteration (incl. linearize) {:.4}",
@@ -117,7 +134,7 @@ fn main() {
         per(p.newton, p.newton_cg_iterations)
     );
     for (k, v) in p.entries() {
-        if k.starts_with("newton") || k.starts_with("polish") {
+        if v != 0.0 {
             println!("  {k}: {:.2}/step", v / st);
         }
     }

@@ -211,10 +211,14 @@ pub struct ContactConfig {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ContactResponse {
+    /// `Inertia`, switching a step to `Delassus` when it stalls on stiff contacts (see
+    /// `forward/response.rs`): stiff cloth at large steps stays out of the obstacles, and
+    /// every other step is solved exactly as with `Inertia`.
+    #[default]
+    Auto,
     /// Each contact node moves with its own inertia against the iterate (paper Eqn. 12):
     /// free per iteration, but slow for stiff cloth at large steps (`k h^2 / m` >> 1), where
     /// unconverged steps can leave nodes inside obstacles.
-    #[default]
     Inertia,
     /// Exact for the current local step via the Delassus operator `C P^{-1} C^T`, formed
     /// once per step (`c / 3` extra solves for c contact nodes): every iterate respects the

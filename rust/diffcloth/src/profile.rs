@@ -45,6 +45,8 @@ pub struct Profile {
     pub contact_solve: Duration,
     /// Contact sets that responded through the Delassus operator (see `ContactResponse`).
     pub delassus_builds: u64,
+    /// Steps `contact.response = "auto"` switched to the Delassus response.
+    pub response_switches: u64,
     /// Contacts at the end of each step, summed over steps, by branch.
     pub contacts_take_off: u64,
     pub contacts_stick: u64,
@@ -93,6 +95,7 @@ impl Profile {
             ("detection_s", self.detection.as_secs_f64()),
             ("contact_s", self.contact_solve.as_secs_f64()),
             ("delassus_builds", self.delassus_builds as f64),
+            ("response_switches", self.response_switches as f64),
             ("contacts_take_off", self.contacts_take_off as f64),
             ("contacts_stick", self.contacts_stick as f64),
             ("contacts_slip", self.contacts_slip as f64),

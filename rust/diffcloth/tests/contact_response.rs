@@ -1,5 +1,6 @@
-//! The two contact responses (inertia splitting, Delassus operator) solve the same step, and
-//! the Delassus one keeps stiff cloth at large steps outside the obstacle.
+//! The contact responses (inertia splitting, Delassus operator, and `auto`, the splitting that
+//! switches a stalling stiff step to the Delassus operator) solve the same step, and the
+//! Delassus operator keeps stiff cloth at large steps outside the obstacle.
 use crate::common::*;
 use diffcloth::{Simulator, StepInput};
 
@@ -62,7 +63,7 @@ fn both_responses_solve_the_same_step() {
             let moved = max_distance(inertia.positions(), &x);
             let apart = max_distance(inertia.positions(), delassus.positions());
             assert!(
-                apart <= 1e-8 * moved.max(1e-3),
+                apart <= 1e-7 * moved.max(1e-3),
                 "step {step}: responses differ by {apart:e} (moved {moved:e}; {a:?} vs {b:?})"
             );
             compared += (b.contacts.stick + b.contacts.slip > 0) as usize;
@@ -81,27 +82,86 @@ fn stiff_cloth_at_large_steps_stays_outside_the_obstacle() {
     // k h^2 / m ~ 1e3: the inertia splitting's error on a sticking node contracts by
     // 1 - 1e-3 per iteration, so steps stopped at the cap with nodes inside the sphere
     // (1.7 cm at step 5). Through the Delassus operator every iterate respects the contact
-    // law: no node goes through, and no energy is created.
-    let mut sim = napkin_on_sphere(9, 1e5, 1.0 / 30.0, "delassus", 300);
-    let thickness = 0.01;
-    let e0 = sim.mechanical_energy();
-    let mut touched = false;
-    for step in 0..30 {
-        let stats = sim.step(StepInput::default()).unwrap();
-        touched |= stats.contacts.stick + stats.contacts.slip > 0;
-        // These steps stop at the cap (PD itself converges slowly here: residual ~1e-4), and a
-        // node found late by re-detection may end a little inside the layer: 1 % of it is
-        // allowed (the inertia response ended 0.17 m inside the sphere).
-        let d = min_obstacle_distance(&sim);
-        assert!(
-            d >= 0.99 * thickness,
-            "step {step}: a node is {d} from the sphere (thickness {thickness}): {stats:?}"
-        );
-        let e = sim.mechanical_energy();
-        assert!(
-            e <= e0 * (1.0 + 1e-6),
-            "step {step}: energy {e} > initial {e0}"
-        );
+    // law: no node goes through, and no energy is created. `auto` (the default) gets there by
+    // switching the stalling steps.
+    for response in ["delassus", "auto"] {
+        let mut sim = napkin_on_sphere(9, 1e5, 1.0 / 30.0, response, 300);
+        let thickness = 0.01;
+        let e0 = sim.mechanical_energy();
+        let mut touched = false;
+        for step in 0..30 {
+            let stats = sim.step(StepInput::default()).unwrap();
+            touched |= stats.contacts.stick + stats.contacts.slip > 0;
+            // These steps stop at the cap (PD itself converges slowly here: residual ~1e-4),
+            // and a node found late by re-detection may end a little inside the layer: 1 % of
+            // it is allowed (the inertia response ended 0.17 m inside the sphere).
+            let d = min_obstacle_distance(&sim);
+            assert!(
+                d >= 0.99 * thickness,
+                "{response}, step {step}: a node is {d} from the sphere (thickness {thickness}): {stats:?}"
+            );
+            let e = sim.mechanical_energy();
+            assert!(
+                e <= e0 * (1.0 + 1e-6),
+                "{response}, step {step}: energy {e} > initial {e0}"
+            );
+        }
+        assert!(touched, "the napkin reached the sphere");
+        if response == "auto" {
+            assert!(sim.profile().response_switches > 0);
+        }
     }
-    assert!(touched, "the napkin reached the sphere");
+}
+
+#[test]
+fn auto_response_is_the_splitting_where_it_converges() {
+    // The stiff napkin on the sphere at a small step, and a soft one at a large step: the
+    // splitting converges well within the cap, so `auto` never switches and its trajectory is
+    // the inertia response's, bit for bit.
+    for (k_stretch, h) in [(1e5, 1e-3), (200.0, 0.01)] {
+        let mut inertia = napkin_on_sphere(9, k_stretch, h, "inertia", 300);
+        let mut auto = napkin_on_sphere(9, k_stretch, h, "auto", 300);
+        let mut active = 0;
+        for _ in 0..(0.4 / h) as usize {
+            let a = inertia.step(StepInput::default()).unwrap();
+            let b = auto.step(StepInput::default()).unwrap();
+            assert_eq!(a, b);
+            active += a.contacts.stick + a.contacts.slip;
+        }
+        assert!(active > 0, "k {k_stretch}, h {h}: no contact");
+        assert_eq!(inertia.positions(), auto.positions());
+        assert_eq!(auto.profile().response_switches, 0);
+    }
+}
+
+#[test]
+fn a_switched_step_reaches_the_delassus_fixed_point() {
+    // Stiff cloth (k h^2 / m ~ 300) converged tightly: the steps `auto` switched land where the
+    // Delassus response does from the same state (the law at the fixed point is one law). At
+    // k 1e5 and h 1/30 neither response converges within 20000 iterations. The bound: stiff
+    // modes contract by about 1 - 1/300 per iteration, so a solve stopped at an update of 1e-13
+    // is up to ~1e-9 from the fixed point (measured apart: 8e-10 in 4 cm of motion).
+    let (k_stretch, h) = (3e3, 0.01);
+    let mut auto = napkin_on_sphere(9, k_stretch, h, "auto", 20000);
+    let mut delassus = napkin_on_sphere(9, k_stretch, h, "delassus", 20000);
+    let mut compared = 0;
+    for step in 0..60 {
+        let (x, v) = (auto.positions().to_vec(), auto.velocities().to_vec());
+        let switches = auto.profile().response_switches;
+        let a = auto.step(StepInput::default()).unwrap();
+        if auto.profile().response_switches == switches || !a.converged {
+            continue;
+        }
+        delassus.reset(Some(&x), Some(&v)).unwrap();
+        let b = delassus.step(StepInput::default()).unwrap();
+        assert!(b.converged, "{b:?}");
+        let moved = max_distance(auto.positions(), &x);
+        let apart = max_distance(auto.positions(), delassus.positions());
+        assert!(
+            apart <= 1e-7 * moved.max(1e-3),
+            "step {step}: auto and delassus differ by {apart:e} (moved {moved:e}; {a:?} vs {b:?})"
+        );
+        compared += 1;
+    }
+    assert!(compared >= 3, "only {compared} switched, converged steps");
 }

@@ -1,10 +1,9 @@
 //! Contact detection for a step: candidates from the entering state (reach set by each
-//! node's velocity), the Delassus operator when that response is chosen, and the check for
+//! node's velocity), and the check for
 //! contacts the first detection missed (any node whose motion over the step crossed an
 //! obstacle it had no contact with).
 
 use super::Simulator;
-use crate::config::ContactResponse;
 use std::time::Instant;
 
 impl Simulator {
@@ -43,20 +42,7 @@ impl Simulator {
         );
         self.work.detect_velocity = velocity;
         self.profile.detection += detect_start.elapsed();
-        if self.delassus_response() {
-            let start = Instant::now();
-            self.work
-                .delassus
-                .build(&self.model.factor, &self.work.contacts.contacts);
-            self.profile.contact_solve += start.elapsed();
-            self.profile.delassus_builds += 1;
-        }
-    }
-
-    /// Whether this step's contacts respond through the Delassus operator.
-    pub(super) fn delassus_response(&self) -> bool {
-        !self.work.contacts.is_empty()
-            && self.model.contact_settings.response == ContactResponse::Delassus
+        self.prepare_response();
     }
 
     /// Whether the solved step (`mapped`) moved a node that has no contact with an obstacle

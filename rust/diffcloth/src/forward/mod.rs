@@ -27,6 +27,7 @@ mod newton;
 mod overlap;
 mod pd;
 mod registry;
+mod response;
 mod safeguards;
 mod state;
 mod step;
@@ -86,10 +87,14 @@ pub(crate) struct State {
 /// Every per-step and per-iteration buffer, allocated once per simulator.
 pub(crate) struct Workspace {
     pub(crate) contacts: ContactSet,
-    /// The step's Delassus operator (contact response `delassus` only).
+    /// The step's Delassus operator (contact response `delassus`, or `auto` once a step
+    /// switched), and whether the solve uses it now (`response.rs`).
     pub(crate) delassus: Delassus,
-    /// Scratch of the contact detection: velocities that set each node's reach, and which
-    /// nodes have a contact with the obstacle being checked.
+    pub(crate) exact_response: bool,
+    /// `auto`'s progress within the solve.
+    pub(crate) auto_switch: response::AutoSwitch,
+    /// Scratch of the contact detection: velocities that set each node's reach, and node
+    /// marks (which nodes have a contact with the obstacle being checked; the contact nodes).
     pub(crate) detect_velocity: Vec<Vec3>,
     pub(crate) covered: Vec<bool>,
     pub(crate) y: Vec<Vec3>,
@@ -118,6 +123,8 @@ impl Workspace {
         Self {
             contacts: ContactSet::default(),
             delassus: Delassus::default(),
+            exact_response: false,
+            auto_switch: Default::default(),
             detect_velocity: Vec::with_capacity(n),
             covered: Vec::with_capacity(n),
             y: zeros.clone(),

@@ -109,10 +109,14 @@ impl Simulator {
     /// and no contact pushes, trust-region Newton steps take over (`newton.rs`); the stopping
     /// test is unchanged. With `"semismooth"`, where contacts push, semi-smooth Newton steps
     /// are tried once the update is below `contact_newton::START` (`contact_newton.rs`).
+    ///
+    /// Contact response (`response.rs`): with `auto`, a step whose contacts are stiff and whose
+    /// rate would not reach the tolerance within the cap switches to the Delassus response.
     pub(super) fn solve_pd(&mut self) -> StepStats {
         self.work.iterate.copy_from_slice(&self.work.y);
         self.work.anderson.reset();
         self.work.contact_newton.start_step();
+        self.start_response();
         if let Some(t) = self.trace.as_mut() {
             t.clear();
         }
@@ -129,6 +133,10 @@ impl Simulator {
         let contact_newton = self.solver.polish == Polish::Semismooth;
         let mut p = Progress::new(energy, residual, accelerate, history);
         while p.residual > tol && p.iterations < max_it {
+            if self.escalate_response(p.iterations, p.residual) {
+                // The map changed: its history no longer describes it.
+                self.work.anderson.reset();
+            }
             // While no contact pushes (all take off at the iterate), E is the exact objective
             // and the energy guard applies; the residual guard only where contact forces act.
             let energy_guard = self.work.contacts.all_take_off();
