@@ -165,3 +165,58 @@ fn a_switched_step_reaches_the_delassus_fixed_point() {
     }
     assert!(compared >= 3, "only {compared} switched, converged steps");
 }
+
+#[test]
+fn auto_switches_identically_recorded_in_a_batch_and_on_any_thread_count() {
+    // One simulation, one answer: the switch depends only on the step's own iterations, so
+    // a recorded simulator and batch members on one or two threads give the standalone
+    // trajectory bit for bit, switched steps included.
+    let template = napkin_on_sphere(9, 1e5, 1.0 / 30.0, "auto", 300);
+    let (model, solver) = (template.model().clone(), template.solver().clone());
+    let starts: Vec<Vec<diffcloth::Vec3>> = (0..2)
+        .map(|i| {
+            let shift = diffcloth::Vec3::new(0.02 * i as f64, 0.0, -0.01 * i as f64);
+            template.positions().iter().map(|p| p + shift).collect()
+        })
+        .collect();
+    let steps = 12;
+    let expected: Vec<Vec<diffcloth::Vec3>> = starts
+        .iter()
+        .enumerate()
+        .map(|(i, x0)| {
+            let mut sim = Simulator::from_model(model.clone(), solver.clone());
+            sim.set_recording(i == 1);
+            sim.reset(Some(x0), None).unwrap();
+            for _ in 0..steps {
+                sim.step(StepInput::default()).unwrap();
+            }
+            assert!(
+                sim.profile().response_switches > 0,
+                "member {i} never switched"
+            );
+            sim.positions().to_vec()
+        })
+        .collect();
+    let mut plain = Simulator::from_model(model.clone(), solver.clone());
+    plain.reset(Some(&starts[1]), None).unwrap();
+    for _ in 0..steps {
+        plain.step(StepInput::default()).unwrap();
+    }
+    assert_eq!(plain.positions(), &expected[1][..], "recorded vs plain");
+    for threads in [1, 2] {
+        let mut batch =
+            diffcloth::Batch::with_threads(model.clone(), solver.clone(), 2, threads).unwrap();
+        for (i, x0) in starts.iter().enumerate() {
+            batch.member_mut(i).unwrap().reset(Some(x0), None).unwrap();
+        }
+        let inputs = vec![diffcloth::MemberInput::default(); 2];
+        for _ in 0..steps {
+            for r in batch.step(&inputs).unwrap() {
+                r.unwrap();
+            }
+        }
+        let got: Vec<Vec<diffcloth::Vec3>> =
+            batch.members().map(|s| s.positions().to_vec()).collect();
+        assert_eq!(got, expected, "{threads} thread(s)");
+    }
+}
