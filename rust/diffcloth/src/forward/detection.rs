@@ -1,7 +1,6 @@
 //! Contact detection for a step: candidates from the entering state (reach set by each
-//! node's velocity), and the check for
-//! contacts the first detection missed (any node whose motion over the step crossed an
-//! obstacle it had no contact with).
+//! node's velocity), and the check for contacts the first detection missed (any node whose
+//! motion over the step crossed an obstacle it had no contact with).
 
 use super::Simulator;
 use std::time::Instant;

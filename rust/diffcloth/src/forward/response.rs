@@ -11,11 +11,11 @@
 //! `auto` (the default) starts every step with `inertia` and switches to `delassus` for the rest
 //! of the step when the splitting is too slow for it: at iterations 20, 40, 80, ... the
 //! residual's rate over the last window, continued, would not reach the tolerance within the
-//! step's iteration cap, and the step has stiff contacts (a contact node whose splitting
-//! contracts by `1 - 1 / STIFF_RATIO` or slower) but at most [`MAX_CONTACT_NODES`] contact
-//! nodes. Both responses
-//! have the same fixed point (the contact law at the solved velocities), so the switch changes
-//! how the step converges, not what it converges to, and the adjoint is the same.
+//! step's iteration cap (with tolerance 0, a fixed iteration count, never), and the step has
+//! stiff contacts (a contact node whose splitting contracts by `1 - 1 / STIFF_RATIO` or
+//! slower) but at most [`MAX_CONTACT_NODES`] contact nodes. Both responses have the same fixed
+//! point (the contact law at the solved velocities), so the switch changes how the step
+//! converges, not what it converges to, and the adjoint is the same.
 
 use super::Simulator;
 use crate::config::ContactResponse;
@@ -26,13 +26,16 @@ use std::time::Instant;
 /// The ribbon sliding on a stiff slope converges in 2 iterations a step; the napkin in the
 /// bowl (`configs/bowl.toml`, stiff by the ratio below) in about 40, at a rate that reaches
 /// the tolerance well within the cap, so it keeps the splitting. Switching it would only slow
-/// it: the Gauss-Seidel over ~1000 coupled contact nodes took it from 30 to 400 ms/step.
+/// it: without the rate test, the Gauss-Seidel over its up to ~2000 coupled contact nodes
+/// took it from 30 to 400 ms/step.
 pub const FIRST_CHECK: usize = 20;
 
 /// `h^2 P_jj / m_j` at or above which a contact node makes the splitting too slow to rely on:
 /// it gains a digit only every `~2.3 STIFF_RATIO` iterations (230 here, most of the default
-/// preset's 300-iteration cap). The soft sphere drop has ratios near 10, the Hat on its head
-/// up to about 170, stiff cloth at large steps 1e3-1e6.
+/// preset's 300-iteration cap). Measured over all nodes: `configs/sphere.toml` 1.7 (median)
+/// to 2.5 (max), `napkin.toml` 13, `sock.toml` 10 / 80, `bowl.toml` 150 / 300, `hat.toml`
+/// 540 / 1400; the stability suite's stiff drops (k_stretch 1e5 for 150, h 1/30 for 1/180)
+/// are thousands of times the sphere's.
 pub const STIFF_RATIO: f64 = 100.0;
 
 /// The most contact nodes `auto` builds the Delassus operator for: its Gauss-Seidel costs
@@ -69,9 +72,8 @@ impl Simulator {
 
     /// At detection: `delassus` builds its operator for the step's contacts.
     pub(super) fn prepare_response(&mut self) {
-        self.work.exact_response =
-            self.model.contact_settings.response == ContactResponse::Delassus;
-        if self.delassus_response() {
+        let delassus = self.model.contact_settings.response == ContactResponse::Delassus;
+        if delassus && !self.work.contacts.is_empty() {
             self.build_delassus();
         }
     }
@@ -79,10 +81,9 @@ impl Simulator {
     /// At the start of every solve of a step: `auto` starts with the splitting again, so a
     /// solve never depends on an earlier solve of the same step.
     pub(super) fn start_response(&mut self) {
-        if self.model.contact_settings.response == ContactResponse::Auto {
-            self.work.exact_response = false;
-            self.work.auto_switch = AutoSwitch::default();
-        }
+        self.work.exact_response =
+            self.model.contact_settings.response == ContactResponse::Delassus;
+        self.work.auto_switch = AutoSwitch::default();
     }
 
     /// With `auto`, after an iteration that ended at `residual`: switches to the Delassus
