@@ -15,18 +15,18 @@ With `--suite contact` (or `all`, the default) it also times the contact scenes 
 branch, share of time per stage, and `contact_adds_pct` = time in detection + contact solve
 relative to the rest of the step (target at Slope, every node in contact: <= 50 %).
 
-Writes benchmarks/results/step_time.{json,md}; a suite run replaces only its own rows. `--mesh PATH` times an OBJ mesh instead (e.g.
+Writes benchmarks/results/step_time.{json,md}; a suite run replaces only its own label's rows
+of that suite (``--label``, default ``current``), so runs of different builds sit side by side. `--mesh PATH` times an OBJ mesh instead (e.g.
 the reference meshes) with the Wind scene's material and its two top corners pinned.
 
 Run: .venv/bin/python scripts/bench_step.py (or python -m benchmarks step_time) [--suite forward|contact|all]
-[--quick] [--mesh PATH ...]
+[--quick] [--mesh PATH ...] [--label L] [--note TEXT]
 """
 
 from __future__ import annotations
 
 import argparse
 import copy
-import json
 import os
 from pathlib import Path
 from typing import Sequence
@@ -79,25 +79,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="fewer steps, for a smoke run")
     p.add_argument("--out", default=None, help="output folder (default benchmarks/results)")
     p.add_argument("--suite", choices=["forward", "contact", "all"], default="all")
+    p.add_argument("--label", default="current", help="rows of this run (a rerun of a label replaces its rows; others stay)")
+    p.add_argument("--note", default="", help="what this run measures (listed with its command above the table)")
     args = p.parse_args(argv)
     steps = 20 if args.quick else args.steps
     out_dir = Path(args.out) if args.out else results_io.RESULTS_DIR
-    previous = out_dir / "step_time.json"
-    rows = json.loads(previous.read_text())["rows"] if previous.exists() and not args.mesh else []
+    rows = []
     if args.suite in ("forward", "all"):
-        rows = [r for r in rows if r.get("suite", "forward") != "forward"] + forward_rows(args, steps)
+        rows += forward_rows(args, steps)
     if args.suite in ("contact", "all") and not args.mesh:
-        rows = [r for r in rows if r.get("suite", "forward") != "contact"] + contact_rows(args)
+        rows += contact_rows(args)
+    rows = [{"label": args.label, **r} for r in rows]
     notes = (
         f"Forward suite: {steps} steps per rollout; time is inside Rust (profile total), `threads` = 1 (serial "
         f"local step) or all ({os.cpu_count()}: parallel local step for >= 2048 constraints). `traj_rel_err` = "
         "norm(X - X_ref) / norm(X_ref - X_0) over the rollout, X_ref = Anderson at tolerance 1e-13. Tolerance = "
         "RMS per-coordinate PD update in metres. Reference C++ (single thread, tol 1e-8): Hat 42-86 ms/step "
         "(111-219 iterations, 0.39 ms/iteration); Wind 12/24/48: 2.1 / 26 / 264 ms/step; Slope 12/24/48: "
-        "0.22 / 1.5 / 9.1 ms/step; Sock 164 ms/step. Contact suite: default solver (Anderson, tolerance 1e-8), "
-        "one thread; `contact_adds_pct` = (detection + contact solve) / (rest of the step)."
+        "0.22 / 1.5 / 9.1 ms/step; Sock 164 ms/step. Contact suite: each scene's default solver (Anderson, tolerance 1e-8, "
+        "its contact response), one thread; `contact_adds_pct` = (detection + contact solve) / (rest of the step). "
+        "Iteration counts are exact; times depend on the machine's load: compare rows of one run."
     )
-    out = results_io.write("step_time", rows, results_io.meta({"steps": steps}), "Forward step time", notes, out_dir=out_dir)
+    meta_block = results_io.meta({"steps": steps, "note": args.note} if args.note else {"steps": steps})
+    if args.mesh:
+        out = results_io.write("step_time", rows, meta_block, "Forward step time", notes, out_dir=out_dir)
+    else:
+        # A suite run replaces its own label's rows of that suite; the other rows keep their run.
+        out = results_io.write_merged("step_time", rows, lambda r: (r.get("label"), r.get("suite", "forward")),
+                                      meta_block, "Forward step time", notes, out_dir=out_dir)
     print(results_io.markdown_table(rows))
     print(f"wrote {out}")
     return 0
