@@ -1,5 +1,7 @@
-"""Part 1, forward: PD tolerance and iteration-cap sweeps, plain PD vs Anderson; ms/step,
-iterations/step and trajectory error against a tightly converged run; a Pareto plot per scene."""
+"""Part 1, forward: PD tolerance and iteration-cap sweeps, plain PD vs Anderson vs Anderson with
+the semismooth Newton polish (issue 15's lever: trust-region Newton where no contact pushes,
+contact Newton where contacts do); ms/step, iterations/step and trajectory error against a
+tightly converged run; a Pareto plot per scene."""
 
 from __future__ import annotations
 
@@ -16,20 +18,29 @@ FORWARD_CAPS = (10, 20, 50, 100, 150, 300)
 #: Cap for the tolerance sweep: generous so that plain PD reaches even 1e-10 (counted if not).
 SWEEP_MAX_ITERATIONS = 5000
 #: The reference trajectory: Anderson converged far below every swept tolerance.
-REFERENCE_SOLVER = dict(acceleration="anderson", tolerance=1e-12, max_iterations=20000)
+REFERENCE_SOLVER = dict(acceleration="anderson", polish="none", tolerance=1e-12, max_iterations=20000)
 #: A run converged 10x tighter than the reference: its error against the reference is the floor
 #: below which trajectory errors are not resolved (large where the scene amplifies per-step
-#: residuals, e.g. the wrinkling 48x48 cloth). Capped: 1e-13 is near round-off.
-REFERENCE_CHECK_SOLVER = dict(acceleration="anderson", tolerance=1e-13, max_iterations=2000)
+#: residuals, e.g. the wrinkling 48x48 cloth). The same cap as the reference: the Hat's contact
+#: steps need thousands of iterations at 1e-13 (at a cap of 2000 its check stopped 3e-4 away).
+REFERENCE_CHECK_SOLVER = dict(acceleration="anderson", polish="none", tolerance=1e-13, max_iterations=20000)
+#: The same with the polish: where a step objective has several minima (the Hat's bending), the
+#: polish may settle in another one than PD; its error against X_ref shows whether it does.
+REFERENCE_CHECK_POLISHED = dict(REFERENCE_CHECK_SOLVER, polish="semismooth", max_iterations=20000)
+#: The swept solvers: (acceleration, polish). Iteration caps only without the polish (a cap
+#: with tolerance 0 would polish every step to its cap).
+SOLVERS = (("none", "none"), ("anderson", "none"), ("anderson", "semismooth"))
 
 
 def forward_settings(tolerances: Sequence[float], caps: Sequence[int]) -> list[tuple[str, dict]]:
-    """The swept solver settings: (sweep kind, set_solver kwargs), plain and Anderson."""
+    """The swept solver settings: (sweep kind, set_solver kwargs) per solver of SOLVERS."""
     out = []
-    for accel in ("none", "anderson"):
-        out += [("tolerance", dict(acceleration=accel, tolerance=t, max_iterations=SWEEP_MAX_ITERATIONS)) for t in tolerances]
-        # Tolerance 0: every step runs exactly `cap` iterations (the reference C++'s regime).
-        out += [("cap", dict(acceleration=accel, tolerance=0.0, max_iterations=c)) for c in caps]
+    for accel, polish in SOLVERS:
+        out += [("tolerance", dict(acceleration=accel, polish=polish, tolerance=t, max_iterations=SWEEP_MAX_ITERATIONS))
+                for t in tolerances]
+        if polish == "none":
+            # Tolerance 0: every step runs exactly `cap` iterations (the reference C++'s regime).
+            out += [("cap", dict(acceleration=accel, polish=polish, tolerance=0.0, max_iterations=c)) for c in caps]
     return out
 
 
@@ -40,11 +51,14 @@ def forward_row(scene: Scene, sweep: str, solver: dict, prof: dict, unconverged:
         "nodes": nodes,
         "steps": steps,
         "acceleration": solver["acceleration"],
+        "polish": solver["polish"],
+        "solver": solver_name(solver),
         "sweep": sweep,
         "tolerance": solver["tolerance"],
         "max_iterations": solver["max_iterations"],
         "ms_per_step": 1e3 * prof["total_s"] / steps,
         "iters_per_step": prof["iterations"] / steps,
+        "newton_steps_per_step": (prof.get("newton_steps", 0) + prof.get("contact_newton_steps", 0)) / steps,
         "unconverged_pct": 100.0 * unconverged / steps,
         "traj_rel_err": err,
     }
@@ -73,16 +87,29 @@ def forward_scene(scene: Scene, tolerances: Sequence[float] = FORWARD_TOLERANCES
     sim.set_solver(**REFERENCE_CHECK_SOLVER)
     traj, prof, unconv = rollout(sim, scene, scene.steps)
     check = forward_row(scene, "reference_check", REFERENCE_CHECK_SOLVER, prof, unconv, scene.steps, trajectory_error(traj, ref), sim.num_nodes)
-    reference["pareto"] = check["pareto"] = False
-    return [reference, check] + rows
+    sim.set_solver(**REFERENCE_CHECK_POLISHED)
+    traj, prof, unconv = rollout(sim, scene, scene.steps)
+    polished = forward_row(scene, "reference_check_polished", REFERENCE_CHECK_POLISHED, prof, unconv, scene.steps,
+                           trajectory_error(traj, ref), sim.num_nodes)
+    reference["pareto"] = check["pareto"] = polished["pareto"] = False
+    return [reference, check, polished] + rows
+
+
+def solver_name(solver: dict) -> str:
+    """``plain``, ``AA`` or ``AA+polish`` (rows of runs before the polish existed: no polish)."""
+    name = "AA" if solver["acceleration"] == "anderson" else "plain"
+    return name + ("+polish" if solver.get("polish", "none") != "none" else "")
 
 
 def setting_label(row: dict) -> str:
-    """Short name of a forward setting: ``plain 1e-08``, ``AA cap 50``."""
-    accel = "AA" if row["acceleration"] == "anderson" else "plain"
+    """Short name of a forward setting: ``plain 1e-08``, ``AA cap 50``, ``AA+polish 1e-10``."""
+    accel = solver_name(row)
     if row["sweep"] == "cap":
         return f"{accel} cap {row['max_iterations']}"
     return f"{accel} {row['tolerance']:.0e}"
+
+
+SOLVER_TITLES = {"plain": "plain PD", "AA": "Anderson", "AA+polish": "Anderson + semismooth polish"}
 
 
 def plot_forward(rows: list[dict], out_dir: Path) -> list[str]:
@@ -92,11 +119,11 @@ def plot_forward(rows: list[dict], out_dir: Path) -> list[str]:
     for scene in dict.fromkeys(r["scene"] for r in rows):
         rs = [r for r in rows if r["scene"] == scene and r["sweep"] in ("tolerance", "cap") and r["traj_rel_err"] > 0]
         fig, ax = plt.subplots(figsize=(6.4, 4.8))
-        for accel, color in (("none", "tab:blue"), ("anderson", "tab:orange")):
+        for solver, color in (("plain", "tab:blue"), ("AA", "tab:orange"), ("AA+polish", "tab:green")):
             for sweep, marker in (("tolerance", "o"), ("cap", "s")):
-                pts = sorted((r["ms_per_step"], r["traj_rel_err"]) for r in rs if r["acceleration"] == accel and r["sweep"] == sweep)
+                pts = sorted((r["ms_per_step"], r["traj_rel_err"]) for r in rs if solver_name(r) == solver and r["sweep"] == sweep)
                 if pts:
-                    name = ("plain PD" if accel == "none" else "Anderson") + (" (tolerance)" if sweep == "tolerance" else " (iteration cap)")
+                    name = SOLVER_TITLES[solver] + (" (tolerance)" if sweep == "tolerance" else " (iteration cap)")
                     ax.plot(*zip(*pts), marker=marker, ls=":", color=color, alpha=0.8, label=name, mfc="none" if sweep == "cap" else color)
         front = sorted((r["ms_per_step"], r["traj_rel_err"]) for r in rs if r.get("pareto"))
         if front:
@@ -121,15 +148,21 @@ def plot_forward(rows: list[dict], out_dir: Path) -> list[str]:
 
 
 def forward_section(rows: list[dict]) -> list[str]:
-    out = ["## 1. Forward: tolerance and iteration cap, plain PD vs Anderson", "",
+    out = ["## 1. Forward: tolerance and iteration cap, plain PD vs Anderson vs Anderson + semismooth polish", "",
            "Per scene: the Pareto front (settings no other setting beats in both ms/step and trajectory error), then "
            "the cheapest setting of each solver at three error levels. `traj_rel_err` = |X - X_ref| / |X_ref - X_0| over "
            "the whole rollout, X_ref = Anderson at tolerance 1e-12 (cap 20000); `reference floor` = the error of a run at "
            "1e-13 against X_ref: errors near it are not resolved. Tolerance = RMS per-coordinate PD update "
            "in metres; `cap N` = tolerance 0, exactly N iterations per step. Initial states: Wind from rest (moved by "
            "gravity and its wind), Slope from seeded random velocities (sigma 0.1 m/s: from rest it slides rigidly and PD is "
-           f"exact in 1-2 iterations), Hat with its effectors moving at {GARMENT_DRIVE} m/s; `hat` is the full scene (head, "
-           "friction, self-collision), `hat_nocontact` the hanging hat.", "",
+           f"exact in 1-2 iterations), Hat with its effectors moving at {GARMENT_DRIVE} m/s; `hat_nocontact` is the hanging hat; "
+           "`hat_on_head` Hat-v0's full scene (head, friction, self-collision), its effectors carrying the hat onto the "
+           "head (straight lines from start (0, 0) over 250 steps, then held), timed from step 240 as it lands, 120 steps; `sphereNxN` the sphere drop placed just above the "
+           "sphere at the shipped drop's impact speed (contact from the first steps). `AA+polish` = Anderson with "
+           "`polish = \"semismooth\"` (Hat-v0's setting): trust-region Newton steps once the update is below 1e-5 where "
+           "no contact pushes, semi-smooth contact Newton where contacts do; same stopping test. `polished 1e-13 vs "
+           "reference` = that polish at 1e-13 against X_ref: above the floor where the polish settles in another minimum "
+           "of a step objective than Anderson does.", "",
            "Reading the plots: where the error sits on a plateau over several settings and then drops by orders of magnitude, "
            "the rollout passes an event it is sensitive to (buckling or snap-through of the hat; wrinkling of the 48x48 cloth, "
            "which has no bending stiffness; a contact switch): near it PD converges slowly, a loose stop lands on a "
@@ -140,22 +173,25 @@ def forward_section(rows: list[dict]) -> list[str]:
         rs = [r for r in rows if r["scene"] == scene and r["sweep"] in ("tolerance", "cap")]
         ref = next(r for r in rows if r["scene"] == scene and r["sweep"] == "reference")
         check = next((r for r in rows if r["scene"] == scene and r["sweep"] == "reference_check"), {})
+        polished = next((r for r in rows if r["scene"] == scene and r["sweep"] == "reference_check_polished"), {})
         front = sorted((r for r in rs if r["pareto"]), key=lambda r: r["ms_per_step"])
         line = {"scene": scene, "steps": ref["steps"], "reference ms/step": ref["ms_per_step"],
                 "reference unconverged %": ref["unconverged_pct"], "reference floor": check.get("traj_rel_err"),
+                "polished 1e-13 vs reference": polished.get("traj_rel_err"),
                 "Pareto front (setting: ms/step, error)": "; ".join(f"{setting_label(r)}: {r['ms_per_step']:.3g}, {r['traj_rel_err']:.1e}" for r in front),
                 "AA share of front": f"{sum(r['acceleration'] == 'anderson' for r in front)}/{len(front)}"}
         for level in (1e-2, 1e-4, 1e-6):
-            for accel, name in (("none", "plain"), ("anderson", "AA")):
-                ok = [r for r in rs if r["acceleration"] == accel and r["traj_rel_err"] <= level]
+            for name in SOLVER_TITLES:
+                ok = [r for r in rs if solver_name(r) == name and r["traj_rel_err"] <= level]
                 best = min(ok, key=lambda r: r["ms_per_step"]) if ok else None
                 line[f"{name} ms @ {level:.0e}"] = None if best is None else f"{best['ms_per_step']:.3g} ({setting_label(best)})"
         summary.append(line)
-    cols = ["scene", "steps", "reference ms/step", "reference floor", "AA share of front", "plain ms @ 1e-02", "AA ms @ 1e-02", "plain ms @ 1e-04",
-            "AA ms @ 1e-04", "plain ms @ 1e-06", "AA ms @ 1e-06"]
+    cols = ["scene", "steps", "reference ms/step", "reference floor", "polished 1e-13 vs reference", "AA share of front"]
+    cols += [f"{name} ms @ {level:.0e}" for level in (1e-2, 1e-4, 1e-6) for name in SOLVER_TITLES]
     out += ["### Cheapest setting per error level (ms/step, one thread; blank: not reached)", "", table(summary, cols), ""]
     out += ["### Pareto fronts", "", table(summary, ["scene", "Pareto front (setting: ms/step, error)"]), ""]
     out += [f"![{s}](accuracy_forward_{s}.png)" for s in dict.fromkeys(r["scene"] for r in rows)] + [""]
-    cols = ["scene", "acceleration", "sweep", "tolerance", "max_iterations", "ms_per_step", "iters_per_step", "unconverged_pct", "traj_rel_err", "pareto"]
+    cols = ["scene", "solver", "sweep", "tolerance", "max_iterations", "ms_per_step", "iters_per_step", "newton_steps_per_step",
+            "unconverged_pct", "traj_rel_err", "pareto"]
     out += ["<details><summary>All forward rows</summary>", "", table(rows, cols), "", "</details>", ""]
     return out
