@@ -119,7 +119,10 @@ impl Delassus {
         }
         for l in 0..c {
             let column = &self.columns[l * n..(l + 1) * n];
-            for (w, &j) in self.w_columns[l * c..(l + 1) * c].iter_mut().zip(&self.nodes) {
+            for (w, &j) in self.w_columns[l * c..(l + 1) * c]
+                .iter_mut()
+                .zip(&self.nodes)
+            {
                 *w = column[j];
             }
         }

@@ -120,7 +120,12 @@ fn self_contact_candidates_and_motion_are_invariant_under_a_uniform_carry() {
         (0..sim.num_nodes())
             .map(|j| {
                 let upper = sim.positions()[j].y > 0.5 * RADIUS;
-                extra + if upper { Vec3::new(0.0, -0.5, 0.0) } else { Vec3::zeros() }
+                extra
+                    + if upper {
+                        Vec3::new(0.0, -0.5, 0.0)
+                    } else {
+                        Vec3::zeros()
+                    }
             })
             .collect()
     };
@@ -148,7 +153,10 @@ fn self_contact_candidates_and_motion_are_invariant_under_a_uniform_carry() {
             .zip(carried.positions())
             .map(|(a, b)| (b - shift - a).norm())
             .fold(0.0, f64::max);
-        assert!(worst < 1e-6, "step {step}: carried fold differs by {worst} m");
+        assert!(
+            worst < 1e-6,
+            "step {step}: carried fold differs by {worst} m"
+        );
     }
     let touched = rest.profile().contacts_stick + rest.profile().contacts_slip;
     assert!(touched > 0, "the layers met");

@@ -331,7 +331,10 @@ mod tests {
         // Scaled so that the largest cotangent is MAX_COT; each weight sums at most two.
         assert!(largest <= 2.0 * MAX_COT && largest > 0.5 * MAX_COT, "{c:?}");
         assert!(c.iter().sum::<f64>().abs() <= 1e-12 * largest, "{c:?}");
-        assert!(b.edge_vector(0, &x).norm() <= 1e-9, "planar rest hinge: e = 0");
+        assert!(
+            b.edge_vector(0, &x).norm() <= 1e-9,
+            "planar rest hinge: e = 0"
+        );
         assert_eq!(b.rest_length(0), 0.0);
     }
 
