@@ -26,7 +26,7 @@ REFERENCE_SOLVER = dict(acceleration="anderson", polish="none", tolerance=1e-12,
 REFERENCE_CHECK_SOLVER = dict(acceleration="anderson", polish="none", tolerance=1e-13, max_iterations=20000)
 #: The same with the polish: where a step objective has several minima (the Hat's bending), the
 #: polish may settle in another one than PD; its error against X_ref shows whether it does.
-REFERENCE_CHECK_POLISHED = dict(REFERENCE_CHECK_SOLVER, polish="semismooth", max_iterations=20000)
+REFERENCE_CHECK_POLISHED = dict(REFERENCE_CHECK_SOLVER, polish="semismooth")
 #: The swept solvers: (acceleration, polish). Iteration caps only without the polish (a cap
 #: with tolerance 0 would polish every step to its cap).
 SOLVERS = (("none", "none"), ("anderson", "none"), ("anderson", "semismooth"))
