@@ -16,7 +16,7 @@ branch, share of time per stage, and `contact_adds_pct` = time in detection + co
 relative to the rest of the step (target at Slope, every node in contact: <= 50 %).
 
 Writes benchmarks/results/step_time.{json,md}; a suite run replaces only its own label's rows
-of that suite (``--label``, default ``current``), so runs of different builds sit side by side. `--mesh PATH` times an OBJ mesh instead (e.g.
+of that suite (``--label``, default ``current``), so runs of different builds sit side by side. `--mesh PATH` times an OBJ mesh instead, into step_time_mesh.{json,md} (e.g.
 the reference meshes) with the Wind scene's material and its two top corners pinned.
 
 Run: .venv/bin/python scripts/bench_step.py (or python -m benchmarks step_time) [--suite forward|contact|all]
@@ -102,7 +102,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     meta_block = results_io.meta({"steps": steps, "note": args.note} if args.note else {"steps": steps})
     if args.mesh:
-        out = results_io.write("step_time", rows, meta_block, "Forward step time", notes, out_dir=out_dir)
+        # A file of its own: the mesh rows must not replace the built-in scenes' labelled runs.
+        out = results_io.write("step_time_mesh", rows, meta_block, "Forward step time (OBJ meshes)", notes, out_dir=out_dir)
     else:
         # A suite run replaces its own label's rows of that suite; the other rows keep their run.
         out = results_io.write_merged("step_time", rows, lambda r: (r.get("label"), r.get("suite", "forward")),
