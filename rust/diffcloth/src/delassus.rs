@@ -62,18 +62,13 @@ pub struct Delassus {
 }
 
 impl Delassus {
-    /// Forms `G` and `W` for this step's contacts: `ceil(c / 3)` solves with `P` (three unit
-    /// columns per node-major solve, one per coordinate).
-    pub fn build(&mut self, factor: &SpdFactor, contacts: &[Contact]) {
-        let n = factor.dim();
+    /// Gives each distinct contact node a slot and returns their number (the operator's size),
+    /// without allocating once warm. `build` starts with this; `auto` calls it alone to see
+    /// whether a step is small enough to build for, so `respond` must not run before `build`.
+    pub fn assign_nodes(&mut self, n: usize, contacts: &[Contact]) -> usize {
         if self.slot.len() != n {
             self.slot = vec![usize::MAX; n];
-            self.rhs = vec![Vec3::zeros(); n];
-            self.out = vec![Vec3::zeros(); n];
-            self.work = vec![Vec3::zeros(); n];
         }
-        self.n = n;
-        self.last_update = f64::INFINITY;
         for &j in &self.nodes {
             self.slot[j] = usize::MAX;
         }
@@ -95,6 +90,21 @@ impl Delassus {
             };
             self.slots.push(s);
         }
+        self.nodes.len()
+    }
+
+    /// Forms `G` and `W` for this step's contacts: `ceil(c / 3)` solves with `P` (three unit
+    /// columns per node-major solve, one per coordinate).
+    pub fn build(&mut self, factor: &SpdFactor, contacts: &[Contact]) {
+        let n = factor.dim();
+        if self.rhs.len() != n {
+            self.rhs = vec![Vec3::zeros(); n];
+            self.out = vec![Vec3::zeros(); n];
+            self.work = vec![Vec3::zeros(); n];
+        }
+        self.n = n;
+        self.last_update = f64::INFINITY;
+        self.assign_nodes(n, contacts);
         let c = self.nodes.len();
         self.columns.resize(c * n, 0.0);
         for (chunk, group) in self.nodes.chunks(3).enumerate() {
@@ -141,6 +151,11 @@ impl Delassus {
     /// contacts' impulses (warm start and result) and branches are updated in place.
     pub fn respond(&mut self, mapped: &mut [Vec3], x_n: &[Vec3], h: f64, contacts: &mut [Contact]) {
         let (c, n) = (self.nodes.len(), self.n);
+        debug_assert_eq!(
+            self.w.len(),
+            c * c,
+            "respond on contact nodes not built for"
+        );
         // Warm start: the previous iteration's impulses.
         self.force.iter_mut().for_each(|f| *f = Vec3::zeros());
         for (contact, &(a, b)) in contacts.iter().zip(&self.slots) {
@@ -227,5 +242,65 @@ impl Delassus {
         if b != usize::MAX {
             self.force[b] -= df;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::contact::Branch;
+
+    fn contact(kind: ContactKind) -> Contact {
+        Contact {
+            kind,
+            normal: Vec3::y(),
+            gap: 0.0,
+            mu: 0.5,
+            obstacle_velocity: Vec3::zeros(),
+            mass: 1.0,
+            branch: Branch::TakeOff,
+            impulse: Vec3::zeros(),
+        }
+    }
+
+    fn obstacle(node: usize) -> Contact {
+        contact(ContactKind::Obstacle { node, obstacle: 0 })
+    }
+
+    fn pair(a: usize, b: usize) -> Contact {
+        contact(ContactKind::SelfPair { a, b })
+    }
+
+    /// Each contact's slots name its own nodes, in the order the contacts list them.
+    fn assert_slots_match(d: &Delassus, contacts: &[Contact]) {
+        assert_eq!(d.slots.len(), contacts.len());
+        for (c, &(a, b)) in contacts.iter().zip(&d.slots) {
+            match c.kind {
+                ContactKind::Obstacle { node, .. } => {
+                    assert_eq!((d.nodes[a], b), (node, usize::MAX));
+                }
+                ContactKind::SelfPair { a: na, b: nb } => {
+                    assert_eq!((d.nodes[a], d.nodes[b]), (na, nb));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn assign_nodes_counts_each_contact_node_once_and_forgets_the_last_step() {
+        let mut d = Delassus::default();
+        // Node 3 in three contacts, 5 in two, 7 in one: two obstacles and two pairs.
+        let step = [obstacle(3), pair(3, 5), obstacle(5), pair(7, 3)];
+        assert_eq!(d.assign_nodes(10, &step), 3);
+        assert_eq!(d.nodes, [3, 5, 7]);
+        assert_slots_match(&d, &step);
+        // The next step's contacts share only node 5: the old slots must not leak into it.
+        let next = [pair(5, 9), obstacle(0), obstacle(9)];
+        assert_eq!(d.assign_nodes(10, &next), 3);
+        assert_eq!(d.nodes, [5, 9, 0]);
+        assert_slots_match(&d, &next);
+        assert_eq!(d.slot.iter().filter(|&&s| s != usize::MAX).count(), 3);
+        assert_eq!(d.assign_nodes(10, &[]), 0);
+        assert!(d.slot.iter().all(|&s| s == usize::MAX));
     }
 }

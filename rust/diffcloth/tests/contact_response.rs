@@ -1,7 +1,9 @@
 //! The contact responses (inertia splitting, Delassus operator, and `auto`, the splitting that
-//! switches a stalling stiff step to the Delassus operator) solve the same step, and the
-//! Delassus operator keeps stiff cloth at large steps outside the obstacle.
+//! switches a stalling stiff step to the Delassus operator) solve the same step, the
+//! Delassus operator keeps stiff cloth at large steps outside the obstacle, and `auto` builds
+//! it only for steps with few enough contact nodes.
 use crate::common::*;
+use diffcloth::forward::MAX_CONTACT_NODES;
 use diffcloth::{Simulator, StepInput};
 
 /// A `rows` x `rows` napkin dropped onto a sphere (radius 0.5) with the given response.
@@ -12,6 +14,20 @@ fn napkin_on_sphere(
     response: &str,
     max_iterations: usize,
 ) -> Simulator {
+    napkin_on_dome(rows, k_stretch, h, response, max_iterations, 0.5)
+}
+
+/// A 1.6 m `rows` x `rows` napkin dropped from 0.2 m above the top of a sphere of the given
+/// radius (a flatter dome for a larger one, so more of the napkin lands on it).
+fn napkin_on_dome(
+    rows: usize,
+    k_stretch: f64,
+    h: f64,
+    response: &str,
+    max_iterations: usize,
+    radius: f64,
+) -> Simulator {
+    let center = 0.5 - radius;
     sim_from_toml(&format!(
         r#"
 h = {h}
@@ -34,7 +50,7 @@ thickness = 0.01
 response = "{response}"
 [[obstacles]]
 mu = 0.3
-shape = {{ kind = "sphere", center = [0.0, 0.0, 0.0], radius = 0.5 }}
+shape = {{ kind = "sphere", center = [0.0, {center}, 0.0], radius = {radius} }}
 [solver]
 # Two solves of one step converged to the same tolerance lie up to ~100x it apart (PD's slow
 # contraction), and `both_responses_solve_the_same_step` allows 1e-8 of the motion: at 1e-12
@@ -219,4 +235,40 @@ fn auto_switches_identically_recorded_in_a_batch_and_on_any_thread_count() {
             batch.members().map(|s| s.positions().to_vec()).collect();
         assert_eq!(got, expected, "{threads} thread(s)");
     }
+}
+
+#[test]
+fn auto_keeps_the_splitting_where_a_step_has_too_many_contact_nodes() {
+    // A 40 x 40 stiff napkin (k h^2 / m ~ 1e3, every contacting step stalls at the cap) on a
+    // flat dome: up to ~1500 of its 1600 nodes touch at once. `auto` may only build the
+    // Delassus operator for at most MAX_CONTACT_NODES contact nodes (one obstacle and no
+    // self-contact here, so a step's contacts are its contact nodes). The 10 % margins allow
+    // for contacts that re-detection adds after the switch's check.
+    let mut sim = napkin_on_dome(40, 1e5, 1.0 / 30.0, "auto", 300, 3.0);
+    let (mut kept_large, mut switched_small) = (0, 0);
+    for step in 0..30 {
+        let before = sim.profile().response_switches;
+        let stats = sim.step(StepInput::default()).unwrap();
+        let switched = sim.profile().response_switches > before;
+        let c = &stats.contacts;
+        let nodes = (c.take_off + c.stick + c.slip) as f64;
+        let limit = MAX_CONTACT_NODES as f64;
+        if nodes > 1.1 * limit {
+            assert!(
+                !switched,
+                "step {step}: switched with {nodes} contact nodes: {stats:?}"
+            );
+            kept_large += !stats.converged as usize;
+        } else if nodes > 0.0 && nodes < 0.9 * limit && switched {
+            switched_small += 1;
+        }
+    }
+    assert!(
+        kept_large >= 5,
+        "only {kept_large} stalled steps over the limit"
+    );
+    assert!(
+        switched_small >= 3,
+        "only {switched_small} switched steps under it"
+    );
 }

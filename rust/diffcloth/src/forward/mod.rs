@@ -34,6 +34,7 @@ mod step;
 
 pub use model::Model;
 pub use overlap::Overlaps;
+pub use response::MAX_CONTACT_NODES;
 
 /// What one forward step did.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -94,7 +95,7 @@ pub(crate) struct Workspace {
     /// `auto`'s progress within the solve.
     pub(crate) auto_switch: response::AutoSwitch,
     /// Scratch of the contact detection: velocities that set each node's reach, and node
-    /// marks (which nodes have a contact with the obstacle being checked; the contact nodes).
+    /// marks (which nodes have a contact with the obstacle being checked).
     pub(crate) detect_velocity: Vec<Vec3>,
     pub(crate) covered: Vec<bool>,
     pub(crate) y: Vec<Vec3>,

@@ -121,7 +121,11 @@ impl Simulator {
             Some(e) => e,
             None => {
                 let e = !self.work.contacts.is_empty()
-                    && self.contact_node_count() <= MAX_CONTACT_NODES
+                    && self
+                        .work
+                        .delassus
+                        .assign_nodes(self.model.num_nodes(), &self.work.contacts.contacts)
+                        <= MAX_CONTACT_NODES
                     && self.max_contact_stiffness_ratio() >= STIFF_RATIO;
                 self.work.auto_switch.eligible = Some(e);
                 e
@@ -143,29 +147,6 @@ impl Simulator {
             .build(&self.model.factor, &self.work.contacts.contacts);
         self.profile.contact_solve += start.elapsed();
         self.profile.delassus_builds += 1;
-    }
-
-    /// Distinct nodes among the step's contacts (the Delassus operator's size), counted
-    /// without allocating: a node's contacts are adjacent only by chance, so mark and count.
-    fn contact_node_count(&mut self) -> usize {
-        let marks = &mut self.work.covered;
-        marks.clear();
-        marks.resize(self.model.num_nodes(), false);
-        let mut count = 0;
-        let mut mark = |j: usize| {
-            count += !marks[j] as usize;
-            marks[j] = true;
-        };
-        for c in &self.work.contacts.contacts {
-            match c.kind {
-                ContactKind::Obstacle { node, .. } => mark(node),
-                ContactKind::SelfPair { a, b } => {
-                    mark(a);
-                    mark(b);
-                }
-            }
-        }
-        count
     }
 
     /// The largest `h^2 P_jj / m_j` over the step's contact nodes.
